@@ -1,0 +1,237 @@
+#include "core/character.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <string>
+#include <unordered_set>
+
+namespace motionlod::core {
+namespace {
+
+bool IsFinite(const Vec3f& v) { return v.allFinite(); }
+
+std::string JointLabel(const RawSkeleton& s, int j) {
+  return "joint " + std::to_string(j) + " ('" + s.joint_names[j] + "')";
+}
+
+}  // namespace
+
+Status ValidateRawCharacter(const RawCharacter& raw) {
+  const RawSkeleton& s = raw.skeleton;
+  const RawSkin& k = raw.skin;
+  const size_t n = s.parents.size();
+  if (n == 0) return InvalidArgument("the skeleton has no joints");
+  if (s.joint_names.size() != n || s.bind_world.size() != n) {
+    return InvalidArgument("skeleton arrays differ in length: " + std::to_string(n) +
+                           " parents, " + std::to_string(s.joint_names.size()) + " names, " +
+                           std::to_string(s.bind_world.size()) + " bind matrices");
+  }
+  if (n > 65535) return InvalidArgument("more than 65535 joints");
+  if (s.parents[0] != -1) return InvalidArgument("joint 0 must be the root (parent -1)");
+  std::unordered_set<std::string> names;
+  for (size_t j = 0; j < n; ++j) {
+    const int jj = static_cast<int>(j);
+    if (j > 0 && (s.parents[j] < 0 || s.parents[j] >= jj)) {
+      return InvalidArgument(JointLabel(s, jj) +
+                             " has parent " + std::to_string(s.parents[j]) +
+                             "; joints must follow their parent and only joint 0 is a root");
+    }
+    if (!names.insert(s.joint_names[j]).second) {
+      return InvalidArgument("two joints are named '" + s.joint_names[j] + "'");
+    }
+    const Affine34d& m = s.bind_world[j];
+    if (!m.allFinite()) return InvalidArgument(JointLabel(s, jj) + " has a non-finite bind matrix");
+    const double det = m.leftCols<3>().determinant();
+    const double scale = m.leftCols<3>().norm();
+    if (!(std::abs(det) > 1e-12 * scale * scale * scale) || scale == 0) {
+      return InvalidArgument(JointLabel(s, jj) + " has a singular bind matrix");
+    }
+  }
+
+  const size_t p = k.positions.size();
+  if (p == 0) return InvalidArgument("the skin has no vertices");
+  if (p > 0x7fffffff) return InvalidArgument("too many vertices");
+  if (k.normals.size() != p) {
+    return InvalidArgument("the skin has " + std::to_string(p) + " positions but " +
+                           std::to_string(k.normals.size()) + " normals");
+  }
+  if (k.influence_offsets.size() != p + 1 || k.influence_offsets[0] != 0) {
+    return InvalidArgument("influence_offsets must have p + 1 entries starting at 0");
+  }
+  if (k.influence_joints.size() != k.influence_weights.size() ||
+      k.influence_offsets.back() != k.influence_joints.size()) {
+    return InvalidArgument("influence arrays disagree with influence_offsets");
+  }
+  for (size_t i = 0; i < p; ++i) {
+    if (!IsFinite(k.positions[i])) {
+      return InvalidArgument("vertex " + std::to_string(i) + " has a non-finite position");
+    }
+    if (!IsFinite(k.normals[i]) || std::abs(k.normals[i].norm() - 1.0f) > 1e-3f) {
+      return InvalidArgument("vertex " + std::to_string(i) + " has a normal that is not unit length");
+    }
+    const uint32_t begin = k.influence_offsets[i], end = k.influence_offsets[i + 1];
+    if (end < begin) return InvalidArgument("influence_offsets decrease at vertex " + std::to_string(i));
+    if (begin == end) {
+      return InvalidArgument("vertex " + std::to_string(i) + " has no influences (zero weights)");
+    }
+    double sum = 0;
+    for (uint32_t e = begin; e < end; ++e) {
+      const int32_t j = k.influence_joints[e];
+      const float w = k.influence_weights[e];
+      if (j < 0 || static_cast<size_t>(j) >= n) {
+        return InvalidArgument("vertex " + std::to_string(i) + " is weighted to joint " +
+                               std::to_string(j) + ", which does not exist");
+      }
+      if (!(w > 0.0f) || !std::isfinite(w)) {
+        return InvalidArgument("vertex " + std::to_string(i) + " has a weight that is not positive");
+      }
+      for (uint32_t f = begin; f < e; ++f) {
+        if (k.influence_joints[f] == j) {
+          return InvalidArgument("vertex " + std::to_string(i) + " lists joint " +
+                                 std::to_string(j) + " twice");
+        }
+      }
+      sum += w;
+    }
+    if (std::abs(sum - 1.0) > 1e-3) {
+      return InvalidArgument("vertex " + std::to_string(i) + " has weights summing to " +
+                             std::to_string(sum) + ", not 1");
+    }
+  }
+  for (size_t f = 0; f < k.triangles.size(); ++f) {
+    for (uint32_t v : k.triangles[f]) {
+      if (v >= p) {
+        return InvalidArgument("triangle " + std::to_string(f) + " refers to vertex " +
+                               std::to_string(v) + " of " + std::to_string(p));
+      }
+    }
+  }
+  return Status::Ok();
+}
+
+int Character::FindJoint(const std::string& name) const {
+  const auto it = std::find(skeleton_.joint_names.begin(), skeleton_.joint_names.end(), name);
+  return it == skeleton_.joint_names.end()
+             ? -1
+             : static_cast<int>(it - skeleton_.joint_names.begin());
+}
+
+StatusOr<std::shared_ptr<const Character>> BuildCharacter(RawCharacter raw) {
+  if (Status status = ValidateRawCharacter(raw); !status.ok()) return status;
+
+  std::shared_ptr<Character> c(new Character());
+  c->name_ = std::move(raw.name);
+  c->skeleton_ = std::move(raw.skeleton);
+  c->skin_ = std::move(raw.skin);
+  const RawSkeleton& s = c->skeleton_;
+  const RawSkin& k = c->skin_;
+  const int n = c->joint_count();
+  const int p = c->vertex_count();
+
+  c->children_.assign(n, {});
+  for (int j = 1; j < n; ++j) c->children_[s.parents[j]].push_back(j);
+
+  // A_i: each triangle's area goes to its three corners.
+  c->vertex_areas_.assign(p, 0.0);
+  for (const auto& tri : k.triangles) {
+    const Vec3d a = k.positions[tri[0]].cast<double>();
+    const Vec3d b = k.positions[tri[1]].cast<double>();
+    const Vec3d d = k.positions[tri[2]].cast<double>();
+    const double area = 0.5 * (b - a).cross(d - a).norm();
+    for (uint32_t v : tri) c->vertex_areas_[v] += area;
+  }
+  // Vertices outside every triangle (point clouds, degenerate faces) still count:
+  // they get the mean area so the fit never ignores them.
+  double total_area = 0;
+  int with_area = 0;
+  for (double a : c->vertex_areas_) {
+    total_area += a;
+    with_area += a > 0;
+  }
+  const double fallback_area = with_area > 0 ? total_area / with_area : 1.0;
+  for (double& a : c->vertex_areas_) {
+    if (a <= 0) a = fallback_area;
+  }
+
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
+  Eigen::Vector3d hi = -lo;
+  for (const Vec3f& v : k.positions) {
+    lo = lo.cwiseMin(v.cast<double>());
+    hi = hi.cwiseMax(v.cast<double>());
+  }
+  c->height_ = (hi - lo).maxCoeff();
+  if (!(c->height_ > 0)) c->height_ = 1.0;
+
+  // Per-joint vertex lists (CSR by joint) and their bounding spheres.
+  c->joint_vertex_offsets_.assign(n + 1, 0);
+  for (int32_t j : k.influence_joints) ++c->joint_vertex_offsets_[j + 1];
+  for (int j = 0; j < n; ++j) c->joint_vertex_offsets_[j + 1] += c->joint_vertex_offsets_[j];
+  c->joint_vertices_.resize(k.influence_joints.size());
+  {
+    std::vector<uint32_t> cursor(c->joint_vertex_offsets_.begin(), c->joint_vertex_offsets_.end() - 1);
+    for (int i = 0; i < p; ++i) {
+      for (uint32_t e = k.influence_offsets[i]; e < k.influence_offsets[i + 1]; ++e) {
+        c->joint_vertices_[cursor[k.influence_joints[e]]++] = static_cast<uint32_t>(i);
+      }
+    }
+  }
+  c->joint_vertex_centers_.resize(n);
+  c->joint_vertex_radii_.assign(n, 0.0);
+  for (int j = 0; j < n; ++j) {
+    const uint32_t begin = c->joint_vertex_offsets_[j], end = c->joint_vertex_offsets_[j + 1];
+    if (begin == end) {
+      c->joint_vertex_centers_[j] = s.bind_world[j].col(3);
+      continue;
+    }
+    Eigen::Vector3d blo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
+    Eigen::Vector3d bhi = -blo;
+    for (uint32_t e = begin; e < end; ++e) {
+      const Vec3d v = k.positions[c->joint_vertices_[e]].cast<double>();
+      blo = blo.cwiseMin(v);
+      bhi = bhi.cwiseMax(v);
+    }
+    const Vec3d center = 0.5 * (blo + bhi);
+    double radius = 0;
+    for (uint32_t e = begin; e < end; ++e) {
+      radius = std::max(radius, (k.positions[c->joint_vertices_[e]].cast<double>() - center).norm());
+    }
+    c->joint_vertex_centers_[j] = center;
+    c->joint_vertex_radii_[j] = radius;
+  }
+
+  // h_j = l_j: summed distance from joint j to each leaf of its subtree. A childless
+  // joint that dominates some vertices ends at a virtual end site, its farthest such
+  // vertex (glTF rigs rarely carry the "...Nub" end joints of fig. 2); a childless
+  // joint without skin is itself the leaf.
+  std::vector<Vec3d> leaf_point(n);
+  std::vector<double> end_site_distance(n, -1.0);
+  for (int j = 0; j < n; ++j) leaf_point[j] = s.bind_world[j].col(3);
+  for (int i = 0; i < p; ++i) {
+    int dominant = -1;
+    float dominant_weight = 0.5f;
+    for (uint32_t e = k.influence_offsets[i]; e < k.influence_offsets[i + 1]; ++e) {
+      if (k.influence_weights[e] >= dominant_weight) {
+        dominant_weight = k.influence_weights[e];
+        dominant = k.influence_joints[e];
+      }
+    }
+    if (dominant < 0 || !c->children_[dominant].empty()) continue;
+    const Vec3d v = k.positions[i].cast<double>();
+    const double d = (v - s.bind_world[dominant].col(3)).norm();
+    if (d > end_site_distance[dominant]) {
+      end_site_distance[dominant] = d;
+      leaf_point[dominant] = v;
+    }
+  }
+  c->subtree_lengths_.assign(n, 0.0);
+  for (int q = 0; q < n; ++q) {
+    if (!c->children_[q].empty()) continue;
+    for (int j = q; j >= 0; j = s.parents[j]) {
+      c->subtree_lengths_[j] += (leaf_point[q] - Vec3d(s.bind_world[j].col(3))).norm();
+    }
+  }
+  return std::shared_ptr<const Character>(std::move(c));
+}
+
+}  // namespace motionlod::core

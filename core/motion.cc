@@ -1,0 +1,52 @@
+#include "core/motion.h"
+
+#include <cmath>
+#include <string>
+
+#include "core/character.h"
+
+namespace motionlod::core {
+
+Status ValidateMotion(const Motion& motion, const Character& character) {
+  if (!(motion.fps > 0) || !std::isfinite(motion.fps)) {
+    return InvalidArgument("the motion's frame rate must be positive, got " + std::to_string(motion.fps));
+  }
+  if (motion.frame_count < 1) return InvalidArgument("the motion has no frames");
+  if (motion.joint_count != character.joint_count()) {
+    return InvalidArgument("the motion animates " + std::to_string(motion.joint_count) +
+                           " joints but the character has " +
+                           std::to_string(character.joint_count()));
+  }
+  const size_t expected = static_cast<size_t>(motion.frame_count) * motion.joint_count;
+  if (motion.joint_world.size() != expected) {
+    return InvalidArgument("the motion holds " + std::to_string(motion.joint_world.size()) +
+                           " matrices, expected frames x joints = " + std::to_string(expected));
+  }
+  for (int t = 0; t < motion.frame_count; ++t) {
+    for (int j = 0; j < motion.joint_count; ++j) {
+      const Affine34d& m = motion.world(t, j);
+      const std::string where = "frame " + std::to_string(t) + ", joint '" +
+                                character.skeleton().joint_names[j] + "'";
+      if (!m.allFinite()) return InvalidArgument("non-finite joint matrix at " + where);
+      const double scale = m.leftCols<3>().norm();
+      if (!(std::abs(m.leftCols<3>().determinant()) > 1e-12 * scale * scale * scale)) {
+        return InvalidArgument("singular joint matrix at " + where);
+      }
+    }
+  }
+  return Status::Ok();
+}
+
+void ComputeSkinningMatrices(const Motion& motion, const Character& character,
+                             std::vector<Affine34d>& out) {
+  const int n = motion.joint_count;
+  std::vector<Affine34d> inverse_bind(n);
+  for (int j = 0; j < n; ++j) inverse_bind[j] = InverseAffine(character.skeleton().bind_world[j]);
+  for (int t = 0; t < motion.frame_count; ++t) {
+    for (int j = 0; j < n; ++j) {
+      out[static_cast<size_t>(t) * n + j] = ComposeAffine(motion.world(t, j), inverse_bind[j]);
+    }
+  }
+}
+
+}  // namespace motionlod::core
