@@ -211,7 +211,7 @@ StatusOr<std::shared_ptr<const Character>> BuildCharacter(RawCharacter raw) {
     int dominant = -1;
     float dominant_weight = 0.5f;
     for (uint32_t e = k.influence_offsets[i]; e < k.influence_offsets[i + 1]; ++e) {
-      if (k.influence_weights[e] >= dominant_weight) {
+      if (k.influence_weights[e] > dominant_weight) {
         dominant_weight = k.influence_weights[e];
         dominant = k.influence_joints[e];
       }

@@ -5,7 +5,8 @@
 #pragma once
 
 #include <Eigen/Core>
-#include <Eigen/StdVector>
+#include <Eigen/Geometry>
+#include <Eigen/LU>
 
 namespace motionlod::core {
 

@@ -1,0 +1,17 @@
+// Polar decomposition A = R S (eq. 8): R the orthonormal factor nearest to A in the
+// Frobenius norm, det(R) = +1 (a rotation, never a reflection).
+#pragma once
+
+#include <Eigen/Core>
+
+namespace motionlod::core {
+
+// Scaled Newton iteration (Higham 1986) on well-conditioned A with det(A) > 0, which
+// converges quadratically in 5 to 8 cheap 3x3 inverses; SVD with a reflection guard
+// otherwise (det(A) <= 0 or nearly singular A). Returns the identity for A = 0.
+Eigen::Matrix3d NearestRotation(const Eigen::Matrix3d& a);
+
+// The SVD path alone: R = U diag(1, 1, det(U V^T)) V^T. The reference for tests.
+Eigen::Matrix3d NearestRotationSvd(const Eigen::Matrix3d& a);
+
+}  // namespace motionlod::core

@@ -1,0 +1,502 @@
+#include "core/solve_levels.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numeric>
+
+#include <Eigen/Cholesky>
+#include <Eigen/SparseCore>
+
+#include "base/hash.h"
+#include "core/polar.h"
+
+namespace motionlod::core {
+
+using Eigen::MatrixXd;
+using SparseMatrixd = Eigen::SparseMatrix<double>;
+
+const char* VariantName(Variant variant) {
+  switch (variant) {
+    case Variant::kVP: return "vp";
+    case Variant::kVPNO: return "vpno";
+    case Variant::kVPPD: return "vp+pd";
+    case Variant::kVPNOPD: return "vpno+pd";
+  }
+  return "?";
+}
+
+StatusOr<Variant> ParseVariant(std::string_view name) {
+  for (Variant v : {Variant::kVP, Variant::kVPNO, Variant::kVPPD, Variant::kVPNOPD}) {
+    if (name == VariantName(v)) return v;
+  }
+  return InvalidArgument("unknown variant '" + std::string(name) +
+                         "'; expected vp, vpno, vp+pd or vpno+pd");
+}
+
+Status SolveSettings::Validate() const {
+  if (!(joint_weight >= 0) || !std::isfinite(joint_weight)) {
+    return InvalidArgument("joint_weight must be finite and >= 0");
+  }
+  if (!(regularization > 0) || !(regularization <= 1e-2)) {
+    return InvalidArgument("regularization must be in (0, 0.01]");
+  }
+  if (sample_frames < 1 || sample_vertices < 1) {
+    return InvalidArgument("sample_frames and sample_vertices must be positive");
+  }
+  return Status::Ok();
+}
+
+uint64_t SolveSettings::Hash() const {
+  uint64_t h = Fnv1a64Value(kAlgorithmVersion, kFnv1a64Offset);
+  h = Fnv1a64Value(static_cast<int>(variant), h);
+  h = Fnv1a64Value(resolve_rigid_translation, h);
+  h = Fnv1a64Value(joint_weight, h);
+  h = Fnv1a64Value(regularization, h);
+  h = Fnv1a64Value(sample_frames, h);
+  return Fnv1a64Value(sample_vertices, h);
+}
+
+struct PreparedMotion::Impl {
+  std::shared_ptr<const Character> character;
+  SolveSettings settings;
+  int n = 0;
+  int frames = 0;
+  MatrixXd kt;                    // 4n x 3T: block (4k, 3t) = K_k(t)^T
+  SparseMatrixd cp, cn;           // 4n x 4n, area-fraction weighted moments
+  SparseMatrixd q_fit;            // alpha Cp + beta_fit Cn
+  MatrixXd f;                     // q_fit * kt, 4n x 3T
+  std::vector<Eigen::Vector4d> joint_point;      // [p0_j; 1]
+  std::vector<Eigen::Vector4d> joint_axis;       // [o0_j; 0], the bind y axis
+  std::vector<double> joint_weight;              // omega * b_j
+  std::vector<Eigen::Matrix4d> joint_fit;        // J_j with alpha and beta_fit
+  double alpha = 1, beta = 1, beta_fit = 1;
+  // Sampled figures.
+  std::vector<int> sample_frames;
+  std::vector<int> sample_vertices;
+  std::vector<Vec3d> sample_normals;  // |frames| x |vertices|: blended original normals
+  double sample_area = 0;
+
+  void EvaluateErrors(const MatrixXd& delta, const std::vector<int>& kept, LevelErrors& out) const;
+  void MaxVertexError(const MatrixXd& delta, LevelErrors& out) const;
+  void SampledErrors(const MatrixXd& delta, LevelErrors& out) const;
+};
+
+namespace {
+
+// Delta_k(t) as a 3x4 matrix from the stacked transposes.
+inline Affine34d DeltaAt(const MatrixXd& delta, int k, int t) {
+  return delta.block<4, 3>(4 * k, 3 * t).transpose();
+}
+
+SparseMatrixd BlocksToSparse(int n, const std::vector<Eigen::Matrix4d>& blocks,
+                             const std::vector<char>& used) {
+  std::vector<Eigen::Triplet<double>> triplets;
+  for (int k = 0; k < n; ++k) {
+    for (int l = 0; l < n; ++l) {
+      if (!used[k * n + l]) continue;
+      const Eigen::Matrix4d& b = blocks[k * n + l];
+      for (int r = 0; r < 4; ++r) {
+        for (int c = 0; c < 4; ++c) {
+          if (b(r, c) != 0) triplets.emplace_back(4 * k + r, 4 * l + c, b(r, c));
+        }
+      }
+    }
+  }
+  SparseMatrixd m(4 * n, 4 * n);
+  m.setFromTriplets(triplets.begin(), triplets.end());
+  return m;
+}
+
+std::vector<int> EvenlySpaced(int count, int available) {
+  const int used = std::min(count, available);
+  std::vector<int> out(used);
+  for (int q = 0; q < used; ++q) {
+    out[q] = used == 1 ? 0
+                       : static_cast<int>(std::llround(static_cast<double>(q) * (available - 1) /
+                                                       (used - 1)));
+  }
+  return out;
+}
+
+}  // namespace
+
+PreparedMotion::PreparedMotion(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+PreparedMotion::~PreparedMotion() = default;
+const Character& PreparedMotion::character() const { return *impl_->character; }
+const SolveSettings& PreparedMotion::settings() const { return impl_->settings; }
+int PreparedMotion::frame_count() const { return impl_->frames; }
+double PreparedMotion::alpha() const { return impl_->alpha; }
+double PreparedMotion::beta() const { return impl_->beta; }
+const MatrixXd& PreparedMotion::original_matrices() const { return impl_->kt; }
+
+StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
+    std::shared_ptr<const Character> character, const Motion& motion,
+    const SolveSettings& settings) {
+  if (!character) return InvalidArgument("PreparedMotion: no character");
+  if (Status status = settings.Validate(); !status.ok()) return status;
+  if (Status status = ValidateMotion(motion, *character); !status.ok()) return status;
+
+  auto impl = std::make_unique<Impl>();
+  Impl& d = *impl;
+  const Character& c = *character;
+  const RawSkin& skin = c.skin();
+  const int n = c.joint_count();
+  const int p = c.vertex_count();
+  const int frames = motion.frame_count;
+  d.character = character;
+  d.settings = settings;
+  d.n = n;
+  d.frames = frames;
+
+  std::vector<Affine34d> skinning(static_cast<size_t>(frames) * n);
+  ComputeSkinningMatrices(motion, c, skinning);
+  d.kt.resize(4 * n, 3 * frames);
+  for (int t = 0; t < frames; ++t) {
+    for (int k = 0; k < n; ++k) d.kt.block<4, 3>(4 * k, 3 * t) = skinning[static_cast<size_t>(t) * n + k].transpose();
+  }
+
+  // Pair moments Cp_kl, Cn_kl over vertices, weighted by area fractions a_i.
+  const std::vector<double>& areas = c.vertex_areas();
+  const double total_area = std::accumulate(areas.begin(), areas.end(), 0.0);
+  std::vector<Eigen::Matrix4d> cp_blocks(static_cast<size_t>(n) * n, Eigen::Matrix4d::Zero());
+  std::vector<Eigen::Matrix4d> cn_blocks(static_cast<size_t>(n) * n, Eigen::Matrix4d::Zero());
+  std::vector<char> used(static_cast<size_t>(n) * n, 0);
+  for (int i = 0; i < p; ++i) {
+    const double a = areas[i] / total_area;
+    Eigen::Vector4d vh;
+    vh << skin.positions[i].cast<double>(), 1.0;
+    Eigen::Vector4d nh;
+    nh << skin.normals[i].cast<double>(), 0.0;
+    const Eigen::Matrix4d vv = vh * vh.transpose();
+    const Eigen::Matrix4d nn = nh * nh.transpose();
+    for (uint32_t e = skin.influence_offsets[i]; e < skin.influence_offsets[i + 1]; ++e) {
+      for (uint32_t g = skin.influence_offsets[i]; g < skin.influence_offsets[i + 1]; ++g) {
+        const size_t block = static_cast<size_t>(skin.influence_joints[e]) * n + skin.influence_joints[g];
+        const double w = a * skin.influence_weights[e] * skin.influence_weights[g];
+        cp_blocks[block] += w * vv;
+        cn_blocks[block] += w * nn;
+        used[block] = 1;
+      }
+    }
+  }
+  d.cp = BlocksToSparse(n, cp_blocks, used);
+  d.cn = BlocksToSparse(n, cn_blocks, used);
+
+  const std::vector<double>& lengths = c.subtree_lengths();
+  const double total_length = std::accumulate(lengths.begin(), lengths.end(), 0.0);
+  d.joint_point.resize(n);
+  d.joint_axis.resize(n);
+  d.joint_weight.resize(n);
+  for (int j = 0; j < n; ++j) {
+    const Affine34d& bind = c.skeleton().bind_world[j];
+    d.joint_point[j] << bind.col(3), 1.0;
+    d.joint_axis[j] << bind.col(1).normalized(), 0.0;
+    d.joint_weight[j] = total_length > 0 ? settings.joint_weight * lengths[j] / total_length : 0.0;
+  }
+
+  // Normalisation: the largest error of the root-only, unoptimised skeleton.
+  {
+    MatrixXd delta(4 * n, 3 * frames);
+    for (int k = 0; k < n; ++k) delta.middleRows(4 * k, 4) = d.kt.middleRows(0, 4) - d.kt.middleRows(4 * k, 4);
+    d.alpha = d.beta = 1.0;
+    LevelErrors root_only;
+    d.EvaluateErrors(delta, {0}, root_only);
+    double max_ep = 0, max_en = 0;
+    for (int t = 0; t < frames; ++t) {
+      max_ep = std::max(max_ep, root_only.ep_vertex[t] + root_only.ep_joint[t]);
+      max_en = std::max(max_en, root_only.en_vertex[t] + root_only.en_joint[t]);
+    }
+    // A motion that never leaves the root's rigid frame has nothing to normalise by.
+    d.alpha = max_ep > 1e-20 * c.height() * c.height() ? 1.0 / max_ep : 1.0 / (c.height() * c.height());
+    d.beta = max_en > 1e-20 ? 1.0 / max_en : 1.0;
+  }
+  d.beta_fit = FitsNormals(settings.variant) ? d.beta : 0.0;
+  d.q_fit = d.alpha * d.cp + d.beta_fit * d.cn;
+  d.f = d.q_fit * d.kt;
+  d.joint_fit.resize(n);
+  for (int j = 0; j < n; ++j) {
+    d.joint_fit[j] = d.joint_weight[j] *
+                     (d.alpha * d.joint_point[j] * d.joint_point[j].transpose() +
+                      d.beta_fit * d.joint_axis[j] * d.joint_axis[j].transpose());
+  }
+
+  // The sample for the per-vertex figures, with the original blended normals.
+  d.sample_frames = EvenlySpaced(settings.sample_frames, frames);
+  const int stride = (p + settings.sample_vertices - 1) / settings.sample_vertices;
+  for (int i = 0; i < p; i += stride) {
+    d.sample_vertices.push_back(i);
+    d.sample_area += areas[i];
+  }
+  d.sample_normals.resize(d.sample_frames.size() * d.sample_vertices.size());
+  for (size_t q = 0; q < d.sample_frames.size(); ++q) {
+    const int t = d.sample_frames[q];
+    for (size_t v = 0; v < d.sample_vertices.size(); ++v) {
+      const int i = d.sample_vertices[v];
+      Vec3d normal = Vec3d::Zero();
+      for (uint32_t e = skin.influence_offsets[i]; e < skin.influence_offsets[i + 1]; ++e) {
+        normal += skin.influence_weights[e] *
+                  (DeltaAt(d.kt, skin.influence_joints[e], t).leftCols<3>() *
+                   skin.normals[i].cast<double>());
+      }
+      d.sample_normals[q * d.sample_vertices.size() + v] = normal;
+    }
+  }
+  return std::shared_ptr<const PreparedMotion>(new PreparedMotion(std::move(impl)));
+}
+
+void PreparedMotion::Impl::EvaluateErrors(const MatrixXd& delta, const std::vector<int>& kept,
+                                          LevelErrors& out) const {
+  // Row sums of delta .* (C delta) over each frame's three columns: tr(Delta^T C Delta).
+  const Eigen::RowVectorXd ep_cols = delta.cwiseProduct(cp * delta).colwise().sum();
+  const Eigen::RowVectorXd en_cols = delta.cwiseProduct(cn * delta).colwise().sum();
+  out.e.assign(frames, 0.0);
+  out.ep_vertex.assign(frames, 0.0);
+  out.ep_joint.assign(frames, 0.0);
+  out.en_vertex.assign(frames, 0.0);
+  out.en_joint.assign(frames, 0.0);
+  for (int t = 0; t < frames; ++t) {
+    out.ep_vertex[t] = std::max(0.0, ep_cols.segment<3>(3 * t).sum());
+    out.en_vertex[t] = std::max(0.0, en_cols.segment<3>(3 * t).sum());
+    for (int j : kept) {
+      const Eigen::Matrix<double, 4, 3> block = delta.block<4, 3>(4 * j, 3 * t);
+      out.ep_joint[t] += joint_weight[j] * (block.transpose() * joint_point[j]).squaredNorm();
+      out.en_joint[t] += joint_weight[j] * (block.transpose() * joint_axis[j]).squaredNorm();
+    }
+    out.e[t] = alpha * (out.ep_vertex[t] + out.ep_joint[t]) +
+               beta * (out.en_vertex[t] + out.en_joint[t]);
+  }
+  out.mean_e = std::accumulate(out.e.begin(), out.e.end(), 0.0) / frames;
+  const auto max_it = std::max_element(out.e.begin(), out.e.end());
+  out.max_e = *max_it;
+  out.max_e_frame = static_cast<int>(max_it - out.e.begin());
+  const double mean_sq = std::accumulate(out.ep_vertex.begin(), out.ep_vertex.end(), 0.0) / frames;
+  out.rms_vertex_error_pct = 100.0 * std::sqrt(mean_sq) / character->height();
+  MaxVertexError(delta, out);
+  SampledErrors(delta, out);
+}
+
+void PreparedMotion::Impl::MaxVertexError(const MatrixXd& delta, LevelErrors& out) const {
+  // Exact maximum of |d_i(t)|, d_i(t) = sum_k w_ik Delta_k(t) [v0_i; 1], over all vertices
+  // and frames without evaluating most of them: |d_i| <= max over i's joints of
+  // U_k(t) = |Delta_k [c_k;1]| + |Delta_k(3x3)|_F r_k, with (c_k, r_k) the bounding sphere
+  // of joint k's vertices. Frames and joints are visited by decreasing bound and only
+  // vertices whose bound beats the best exact value so far are evaluated.
+  const Character& c = *character;
+  const RawSkin& skin = c.skin();
+  const auto& centers = c.joint_vertex_centers();
+  const auto& radii = c.joint_vertex_radii();
+  const auto& joint_offsets = c.joint_vertex_offsets();
+  const auto& joint_vertices = c.joint_vertices();
+  std::vector<double> bound(static_cast<size_t>(frames) * n, 0.0);
+  std::vector<double> frame_bound(frames, 0.0);
+  for (int t = 0; t < frames; ++t) {
+    for (int k = 0; k < n; ++k) {
+      if (joint_offsets[k] == joint_offsets[k + 1]) continue;
+      const Affine34d dk = DeltaAt(delta, k, t);
+      const double u = TransformPoint(dk, centers[k]).norm() + dk.leftCols<3>().norm() * radii[k];
+      bound[static_cast<size_t>(t) * n + k] = u;
+      frame_bound[t] = std::max(frame_bound[t], u);
+    }
+  }
+  std::vector<int> order(frames);
+  std::iota(order.begin(), order.end(), 0);
+  std::sort(order.begin(), order.end(), [&](int a, int b) { return frame_bound[a] > frame_bound[b]; });
+
+  double best = 0;
+  int best_frame = 0, best_vertex = 0;
+  std::vector<int> stamp(c.vertex_count(), -1);
+  std::vector<Affine34d> frame_delta(n);
+  for (int t : order) {
+    if (frame_bound[t] <= best) break;
+    for (int k = 0; k < n; ++k) frame_delta[k] = DeltaAt(delta, k, t);
+    for (int k = 0; k < n; ++k) {
+      if (bound[static_cast<size_t>(t) * n + k] <= best) continue;
+      for (uint32_t e = joint_offsets[k]; e < joint_offsets[k + 1]; ++e) {
+        const uint32_t i = joint_vertices[e];
+        if (stamp[i] == t) continue;
+        stamp[i] = t;
+        Vec3d d = Vec3d::Zero();
+        const Vec3d v0 = skin.positions[i].cast<double>();
+        for (uint32_t g = skin.influence_offsets[i]; g < skin.influence_offsets[i + 1]; ++g) {
+          d += skin.influence_weights[g] * TransformPoint(frame_delta[skin.influence_joints[g]], v0);
+        }
+        const double length = d.norm();
+        if (length > best) {
+          best = length;
+          best_frame = t;
+          best_vertex = static_cast<int>(i);
+        }
+      }
+    }
+  }
+  out.max_vertex_error_pct = 100.0 * best / c.height();
+  out.max_vertex_frame = best_frame;
+  out.max_vertex_index = best_vertex;
+}
+
+void PreparedMotion::Impl::SampledErrors(const MatrixXd& delta, LevelErrors& out) const {
+  const RawSkin& skin = character->skin();
+  const std::vector<double>& areas = character->vertex_areas();
+  double distance_sum = 0, angle_sum = 0;
+  for (size_t q = 0; q < sample_frames.size(); ++q) {
+    const int t = sample_frames[q];
+    for (size_t v = 0; v < sample_vertices.size(); ++v) {
+      const int i = sample_vertices[v];
+      const Vec3d v0 = skin.positions[i].cast<double>();
+      const Vec3d n0 = skin.normals[i].cast<double>();
+      Vec3d d = Vec3d::Zero(), dn = Vec3d::Zero();
+      for (uint32_t g = skin.influence_offsets[i]; g < skin.influence_offsets[i + 1]; ++g) {
+        const Affine34d dk = DeltaAt(delta, skin.influence_joints[g], t);
+        d += skin.influence_weights[g] * TransformPoint(dk, v0);
+        dn += skin.influence_weights[g] * TransformDirection(dk, n0);
+      }
+      const Vec3d& normal = sample_normals[q * sample_vertices.size() + v];
+      const Vec3d reduced = normal + dn;
+      distance_sum += areas[i] * d.norm();
+      angle_sum += areas[i] * std::atan2(normal.cross(reduced).norm(), normal.dot(reduced));
+    }
+  }
+  const double weight = sample_area * static_cast<double>(sample_frames.size());
+  out.mean_vertex_error_pct = 100.0 * distance_sum / weight / character->height();
+  out.mean_normal_error_deg = angle_sum / weight * 180.0 / M_PI;
+}
+
+namespace {
+
+// The normal equations of one level: G (4m x 4m, lambda included), B (4m x 3T) and
+// their solution X.
+struct LevelSystem {
+  MatrixXd g, b, x;
+};
+
+Status ValidateLevel(const ReducedSkeleton& level, int n) {
+  const int m = level.kept_count();
+  if (static_cast<int>(level.joint_to_slot.size()) != n || m < 1 || m > n ||
+      level.kept_joints[0] != 0) {
+    return InvalidArgument("SolveLevel: the reduced skeleton does not belong to this character");
+  }
+  for (int k = 0; k < n; ++k) {
+    if (level.joint_to_slot[k] < 0 || level.joint_to_slot[k] >= m) {
+      return InvalidArgument("SolveLevel: joint " + std::to_string(k) + " maps to no kept joint");
+    }
+  }
+  for (int s = 0; s < m; ++s) {
+    const int j = level.kept_joints[s];
+    if (j < 0 || j >= n || level.joint_to_slot[j] != s) {
+      return InvalidArgument("SolveLevel: kept joint " + std::to_string(s) + " is inconsistent");
+    }
+  }
+  return Status::Ok();
+}
+
+StatusOr<LevelSystem> SolveSystem(const PreparedMotion::Impl& d, const ReducedSkeleton& level) {
+  if (Status status = ValidateLevel(level, d.n); !status.ok()) return status;
+  const int n = d.n;
+  const int m = level.kept_count();
+  const int dim = 4 * m;
+  const int cols = 3 * d.frames;
+  const std::vector<int>& phi = level.joint_to_slot;
+  LevelSystem system;
+
+  // G = P Q P^T + S J S^T + lambda I.
+  MatrixXd& g = system.g;
+  g = MatrixXd::Zero(dim, dim);
+  for (int col = 0; col < d.q_fit.outerSize(); ++col) {
+    const int gc = 4 * phi[col / 4] + col % 4;
+    for (SparseMatrixd::InnerIterator it(d.q_fit, col); it; ++it) {
+      const int row = static_cast<int>(it.row());
+      g(4 * phi[row / 4] + row % 4, gc) += it.value();
+    }
+  }
+  for (int s = 0; s < m; ++s) g.block<4, 4>(4 * s, 4 * s) += d.joint_fit[level.kept_joints[s]];
+  const double trace = g.trace();
+  const double lambda = d.settings.regularization * (trace > 0 ? trace / dim : 1.0);
+  g.diagonal().array() += lambda;
+
+  // B = P F + S (J + lambda I) Kt.
+  MatrixXd& b = system.b;
+  b = MatrixXd::Zero(dim, cols);
+  for (int k = 0; k < n; ++k) b.middleRows(4 * phi[k], 4) += d.f.middleRows(4 * k, 4);
+  for (int s = 0; s < m; ++s) {
+    const int j = level.kept_joints[s];
+    b.middleRows(4 * s, 4).noalias() +=
+        (d.joint_fit[j] + lambda * Eigen::Matrix4d::Identity()) * d.kt.middleRows(4 * j, 4);
+  }
+
+  const Eigen::LLT<MatrixXd> llt(g);
+  if (llt.info() != Eigen::Success) {
+    return Status(StatusCode::kInternal, "SolveLevel: the normal matrix is not positive definite");
+  }
+  system.x = llt.solve(b);
+  return system;
+}
+
+}  // namespace
+
+StatusOr<Eigen::MatrixXd> PreparedMotion::SolveLeastSquares(const ReducedSkeleton& level) const {
+  auto system = SolveSystem(*impl_, level);
+  if (!system.ok()) return system.status();
+  return std::move(system->x);
+}
+
+StatusOr<LevelResult> PreparedMotion::SolveLevel(const ReducedSkeleton& level) const {
+  const Impl& d = *impl_;
+  auto system = SolveSystem(d, level);
+  if (!system.ok()) return system.status();
+  const int n = d.n;
+  const int m = level.kept_count();
+  const int cols = 3 * d.frames;
+  const std::vector<int>& phi = level.joint_to_slot;
+  const MatrixXd& g = system->g;
+  const MatrixXd& b = system->b;
+  MatrixXd& x = system->x;
+
+  if (IsRigid(d.settings.variant)) {
+    for (int t = 0; t < d.frames; ++t) {
+      for (int s = 0; s < m; ++s) {
+        const Eigen::Matrix3d a = x.block<3, 3>(4 * s, 3 * t).transpose();
+        x.block<3, 3>(4 * s, 3 * t) = NearestRotation(a).transpose();
+      }
+    }
+    if (d.settings.resolve_rigid_translation) {
+      // x_T = G_TT^-1 (b_T - G_TN x_N): translations are rows 4s+3, the rest is fixed.
+      MatrixXd g_tt(m, m), g_tn(m, 3 * m), b_t(m, cols), x_n(3 * m, cols);
+      for (int s = 0; s < m; ++s) {
+        for (int u = 0; u < m; ++u) {
+          g_tt(s, u) = g(4 * s + 3, 4 * u + 3);
+          for (int r = 0; r < 3; ++r) g_tn(s, 3 * u + r) = g(4 * s + 3, 4 * u + r);
+        }
+        b_t.row(s) = b.row(4 * s + 3);
+        for (int r = 0; r < 3; ++r) x_n.row(3 * s + r) = x.row(4 * s + r);
+      }
+      b_t.noalias() -= g_tn * x_n;
+      const MatrixXd x_t = g_tt.llt().solve(b_t);
+      for (int s = 0; s < m; ++s) x.row(4 * s + 3) = x_t.row(s);
+    }
+  }
+
+  LevelResult result;
+  result.skeleton = level;
+  result.matrices.resize(static_cast<size_t>(d.frames) * m);
+  for (int t = 0; t < d.frames; ++t) {
+    for (int s = 0; s < m; ++s) {
+      result.matrices[static_cast<size_t>(t) * m + s] =
+          x.block<4, 3>(4 * s, 3 * t).transpose().cast<float>();
+    }
+  }
+
+  MatrixXd delta(4 * n, cols);
+  for (int k = 0; k < n; ++k) {
+    delta.middleRows(4 * k, 4) = x.middleRows(4 * phi[k], 4) - d.kt.middleRows(4 * k, 4);
+  }
+  d.EvaluateErrors(delta, level.kept_joints, result.optimized);
+  for (int k = 0; k < n; ++k) {
+    delta.middleRows(4 * k, 4) =
+        d.kt.middleRows(4 * level.kept_joints[phi[k]], 4) - d.kt.middleRows(4 * k, 4);
+  }
+  d.EvaluateErrors(delta, level.kept_joints, result.baseline);
+  return result;
+}
+
+}  // namespace motionlod::core

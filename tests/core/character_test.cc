@@ -1,0 +1,121 @@
+#include "core/character.h"
+
+#include <cmath>
+
+#include <gtest/gtest.h>
+
+#include "tests/core/fixtures.h"
+
+namespace motionlod::core {
+namespace {
+
+using testing::MakeCreature;
+
+TEST(BuildCharacter, AcceptsTheCreatureAndDerivesAreasAndHeight) {
+  auto built = BuildCharacter(MakeCreature());
+  ASSERT_TRUE(built.ok()) << built.status().ToString();
+  const Character& c = **built;
+  EXPECT_EQ(c.joint_count(), 8);
+  EXPECT_EQ(c.vertex_count(), 7 * 5 * 8);
+  double total = 0;
+  for (double a : c.vertex_areas()) total += a;
+  // Each triangle's area is counted at its three corners.
+  double triangles = 0;
+  for (const auto& tri : c.skin().triangles) {
+    const Vec3d a = c.skin().positions[tri[0]].cast<double>();
+    const Vec3d b = c.skin().positions[tri[1]].cast<double>();
+    const Vec3d d = c.skin().positions[tri[2]].cast<double>();
+    triangles += 0.5 * (b - a).cross(d - a).norm();
+  }
+  EXPECT_NEAR(total, 3 * triangles, 1e-9);
+  // Longest side of the bind bounding box: y from the root ring (0) to the head ring (2.5);
+  // x only spans the hands' rings, -1.2 to 1.2.
+  EXPECT_NEAR(c.height(), 2.5, 1e-6);
+}
+
+TEST(BuildCharacter, SubtreeLengthSumsDistancesToLeaves) {
+  // Two bones along y, skin weighted 1.0 to each joint: the leaf's end site is the
+  // farthest vertex it dominates.
+  RawCharacter raw;
+  raw.skeleton.joint_names = {"a", "b"};
+  raw.skeleton.parents = {-1, 0};
+  raw.skeleton.bind_world = {testing::Translation(0, 0, 0), testing::Translation(0, 1, 0)};
+  raw.skin.positions = {Vec3f(0, 0, 0), Vec3f(0, 1, 0), Vec3f(0, 3, 0)};
+  raw.skin.normals = {Vec3f(1, 0, 0), Vec3f(1, 0, 0), Vec3f(1, 0, 0)};
+  raw.skin.influence_offsets = {0, 1, 2, 3};
+  raw.skin.influence_joints = {0, 1, 1};
+  raw.skin.influence_weights = {1, 1, 1};
+  auto built = BuildCharacter(raw);
+  ASSERT_TRUE(built.ok()) << built.status().ToString();
+  // Leaf b ends at (0,3,0): h_b = 2, h_a = 3.
+  EXPECT_DOUBLE_EQ((*built)->subtree_lengths()[1], 2.0);
+  EXPECT_DOUBLE_EQ((*built)->subtree_lengths()[0], 3.0);
+}
+
+TEST(BuildCharacter, ChildlessJointWithSkinEndsAtItsFarthestVertex) {
+  auto built = BuildCharacter(MakeCreature());
+  ASSERT_TRUE(built.ok());
+  const Character& c = **built;
+  // head (0,2.5) dominates (weight > 0.5) the neck tube's rings at y = 2.375 and 2.5,
+  // radius 0.15: the farthest, its end site, is a vertex of the ring at y = 2.375.
+  EXPECT_NEAR(c.subtree_lengths()[3], std::hypot(0.125, 0.15), 1e-6);
+  EXPECT_NEAR(c.subtree_lengths()[2], std::hypot(0.375, 0.15), 1e-6);
+}
+
+RawCharacter Valid() { return MakeCreature(4, 1); }
+
+TEST(ValidateRawCharacter, RejectsEachInvalidField) {
+  struct Case {
+    const char* what;
+    void (*mutate)(RawCharacter&);
+    const char* expect;
+  };
+  const Case cases[] = {
+      {"no joints", [](RawCharacter& c) { c.skeleton = {}; }, "no joints"},
+      {"two roots", [](RawCharacter& c) { c.skeleton.parents[2] = -1; }, "parent"},
+      {"parent after child", [](RawCharacter& c) { c.skeleton.parents[1] = 5; }, "parent"},
+      {"duplicate name", [](RawCharacter& c) { c.skeleton.joint_names[2] = "spine"; }, "named"},
+      {"nan bind", [](RawCharacter& c) { c.skeleton.bind_world[3](0, 3) = NAN; }, "non-finite"},
+      {"singular bind", [](RawCharacter& c) { c.skeleton.bind_world[3].leftCols<3>().setZero(); }, "singular"},
+      {"no vertices", [](RawCharacter& c) { c.skin = {}; }, "no vertices"},
+      {"nan position", [](RawCharacter& c) { c.skin.positions[7].x() = NAN; }, "non-finite"},
+      {"normal length", [](RawCharacter& c) { c.skin.normals[3] *= 2; }, "unit"},
+      {"weights sum", [](RawCharacter& c) { c.skin.influence_weights[0] = 0.5f; }, "summing"},
+      {"zero weight", [](RawCharacter& c) { c.skin.influence_weights[0] = 0.0f; }, "not positive"},
+      {"bad joint", [](RawCharacter& c) { c.skin.influence_joints[0] = 99; }, "does not exist"},
+      {"bad triangle", [](RawCharacter& c) { c.skin.triangles[0][1] = 100000; }, "triangle"},
+      {"offsets", [](RawCharacter& c) { c.skin.influence_offsets.pop_back(); }, "influence_offsets"},
+  };
+  ASSERT_TRUE(ValidateRawCharacter(Valid()).ok());
+  for (const Case& test : cases) {
+    RawCharacter c = Valid();
+    test.mutate(c);
+    const Status status = ValidateRawCharacter(c);
+    EXPECT_FALSE(status.ok()) << test.what;
+    EXPECT_EQ(status.code(), StatusCode::kInvalidArgument) << test.what;
+    EXPECT_NE(status.message().find(test.expect), std::string::npos)
+        << test.what << ": " << status.message();
+    EXPECT_FALSE(BuildCharacter(c).ok()) << test.what;
+  }
+}
+
+TEST(ValidateMotion, RejectsShapeAndValueErrors) {
+  const auto c = testing::BuildOrDie(MakeCreature());
+  Motion m = testing::MakeWaveMotion(*c, 3);
+  ASSERT_TRUE(ValidateMotion(m, *c).ok());
+  Motion bad = m;
+  bad.fps = 0;
+  EXPECT_FALSE(ValidateMotion(bad, *c).ok());
+  bad = m;
+  bad.joint_world.pop_back();
+  EXPECT_FALSE(ValidateMotion(bad, *c).ok());
+  bad = m;
+  bad.joint_world[5](1, 1) = INFINITY;
+  EXPECT_NE(ValidateMotion(bad, *c).message().find("frame 0"), std::string::npos);
+  bad = m;
+  bad.joint_count = 7;
+  EXPECT_FALSE(ValidateMotion(bad, *c).ok());
+}
+
+}  // namespace
+}  // namespace motionlod::core

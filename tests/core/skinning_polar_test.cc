@@ -1,0 +1,74 @@
+#include <random>
+
+#include <gtest/gtest.h>
+
+#include "core/polar.h"
+#include "core/skinning.h"
+#include "tests/core/fixtures.h"
+
+namespace motionlod::core {
+namespace {
+
+TEST(SkinningJob, IdentityMatricesReproduceTheBindPose) {
+  const auto c = testing::BuildOrDie(testing::MakeCreature());
+  std::vector<Affine34f> k(c->joint_count(), IdentityAffine().cast<float>());
+  std::vector<Vec3f> positions(c->vertex_count()), normals(c->vertex_count());
+  SkinningJob job{&c->skin(), k, positions, normals};
+  ASSERT_TRUE(job.Run().ok());
+  for (int i = 0; i < c->vertex_count(); ++i) {
+    EXPECT_TRUE(positions[i].isApprox(c->skin().positions[i], 1e-6f));
+    EXPECT_TRUE(normals[i].isApprox(c->skin().normals[i], 1e-6f));
+  }
+}
+
+TEST(SkinningJob, BlendsMatricesByWeight) {
+  const auto c = testing::BuildOrDie(testing::MakeCreature());
+  std::vector<Affine34f> k(c->joint_count(), IdentityAffine().cast<float>());
+  k[1].col(3) << 1, 0, 0;  // spine moves +x by 1
+  std::vector<Vec3f> positions(c->vertex_count());
+  ASSERT_TRUE((SkinningJob{&c->skin(), k, positions, {}}).Run().ok());
+  const RawSkin& skin = c->skin();
+  for (int i = 0; i < c->vertex_count(); ++i) {
+    float w_spine = 0;
+    for (uint32_t e = skin.influence_offsets[i]; e < skin.influence_offsets[i + 1]; ++e) {
+      if (skin.influence_joints[e] == 1) w_spine = skin.influence_weights[e];
+    }
+    EXPECT_NEAR(positions[i].x() - skin.positions[i].x(), w_spine, 1e-6f);
+  }
+}
+
+TEST(SkinningJob, ValidateRejectsWrongShapesAndTouchesNothing) {
+  const auto c = testing::BuildOrDie(testing::MakeCreature());
+  std::vector<Affine34f> k(3, IdentityAffine().cast<float>());  // too few matrices
+  std::vector<Vec3f> positions(c->vertex_count(), Vec3f::Constant(7));
+  EXPECT_FALSE((SkinningJob{&c->skin(), k, positions, {}}).Run().ok());
+  EXPECT_EQ(positions[0], Vec3f::Constant(7));
+  std::vector<Affine34f> all(c->joint_count(), IdentityAffine().cast<float>());
+  std::vector<Vec3f> short_positions(5);
+  EXPECT_FALSE((SkinningJob{&c->skin(), all, short_positions, {}}).Validate().ok());
+  EXPECT_FALSE((SkinningJob{nullptr, all, positions, {}}).Validate().ok());
+}
+
+TEST(NearestRotation, NewtonMatchesSvdAndIsARotation) {
+  std::mt19937 rng(7);
+  std::normal_distribution<double> noise(0, 1);
+  for (int trial = 0; trial < 500; ++trial) {
+    Eigen::Matrix3d a;
+    for (int q = 0; q < 9; ++q) a(q / 3, q % 3) = noise(rng);
+    const Eigen::Matrix3d r = NearestRotation(a);
+    EXPECT_NEAR((r.transpose() * r - Eigen::Matrix3d::Identity()).norm(), 0, 1e-12);
+    EXPECT_NEAR(r.determinant(), 1.0, 1e-12);
+    EXPECT_TRUE(r.isApprox(NearestRotationSvd(a), 1e-9)) << a;
+  }
+}
+
+TEST(NearestRotation, HandlesReflectionsScaleAndZero) {
+  const Eigen::Matrix3d mirror = Eigen::Vector3d(1, 1, -1).asDiagonal();
+  EXPECT_NEAR(NearestRotation(mirror).determinant(), 1.0, 1e-12);
+  const Eigen::Matrix3d scaled = 3.0 * Eigen::AngleAxisd(0.4, Vec3d::UnitY()).toRotationMatrix();
+  EXPECT_TRUE(NearestRotation(scaled).isApprox(scaled / 3.0, 1e-12));
+  EXPECT_TRUE(NearestRotation(Eigen::Matrix3d::Zero()).isIdentity());
+}
+
+}  // namespace
+}  // namespace motionlod::core

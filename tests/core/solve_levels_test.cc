@@ -1,0 +1,214 @@
+#include "core/solve_levels.h"
+
+#include <gtest/gtest.h>
+
+#include "core/rank_joints.h"
+#include "core/reference_solver.h"
+#include "tests/core/fixtures.h"
+
+namespace motionlod::core {
+namespace {
+
+using testing::BuildOrDie;
+using testing::MakeCreature;
+using testing::MakeWaveMotion;
+
+struct Scene {
+  std::shared_ptr<const Character> character;
+  Motion motion;
+  JointRanking ranking;
+};
+
+Scene MakeScene(int frames = 24) {
+  Scene s;
+  s.character = BuildOrDie(MakeCreature());
+  s.motion = MakeWaveMotion(*s.character, frames);
+  s.ranking = *RankJointsJob{s.character.get(), &s.motion, {}}.Run();
+  return s;
+}
+
+std::shared_ptr<const PreparedMotion> Prepare(const Scene& s, Variant variant) {
+  SolveSettings settings;
+  settings.variant = variant;
+  auto prepared = PreparedMotion::Create(s.character, s.motion, settings);
+  EXPECT_TRUE(prepared.ok()) << prepared.status().ToString();
+  return *prepared;
+}
+
+LevelResult Solve(const PreparedMotion& prepared, const Scene& s, int kept) {
+  auto level = ReduceSkeletonToCount(*s.character, s.ranking, kept);
+  EXPECT_TRUE(level.ok());
+  auto result = prepared.SolveLevel(*level);
+  EXPECT_TRUE(result.ok()) << result.status().ToString();
+  return *result;
+}
+
+TEST(SolveLevel, LeastSquaresEqualsTheNaivePerFrameSolve) {
+  const Scene s = MakeScene(6);
+  for (Variant variant : {Variant::kVP, Variant::kVPNO}) {
+    const auto prepared = Prepare(s, variant);
+    for (int kept : {1, 3, 5, 8}) {
+      const auto level = *ReduceSkeletonToCount(*s.character, s.ranking, kept);
+      const auto fast = prepared->SolveLeastSquares(level);
+      ASSERT_TRUE(fast.ok());
+      for (int t = 0; t < s.motion.frame_count; ++t) {
+        const std::vector<Affine34d> naive = SolveFrameNaive(*prepared, level, t);
+        for (int slot = 0; slot < kept; ++slot) {
+          const Affine34d k = fast->block<4, 3>(4 * slot, 3 * t).transpose();
+          EXPECT_LE((k - naive[slot]).norm(), 1e-9 * naive[slot].norm())
+              << VariantName(variant) << " kept " << kept << " frame " << t;
+        }
+      }
+    }
+  }
+}
+
+TEST(SolveLevel, StoredMatricesAreTheLeastSquaresSolutionInFloat) {
+  const Scene s = MakeScene(6);
+  for (Variant variant : {Variant::kVP, Variant::kVPNO}) {
+    const auto prepared = Prepare(s, variant);
+    for (int kept : {1, 3, 5, 8}) {
+      const LevelResult result = Solve(*prepared, s, kept);
+      for (int t = 0; t < s.motion.frame_count; ++t) {
+        const std::vector<Affine34d> naive = SolveFrameNaive(*prepared, result.skeleton, t);
+        for (int slot = 0; slot < kept; ++slot) {
+          const Affine34d fast = result.matrices[t * kept + slot].cast<double>();
+          EXPECT_LE((fast - naive[slot]).norm(), 1e-5 * naive[slot].norm())
+              << VariantName(variant) << " kept " << kept << " frame " << t;
+        }
+      }
+    }
+  }
+}
+
+TEST(SolveLevel, ReproducesTheOriginalWhenNoJointIsRemoved) {
+  const Scene s = MakeScene();
+  for (Variant variant : {Variant::kVP, Variant::kVPNO, Variant::kVPPD, Variant::kVPNOPD}) {
+    const auto prepared = Prepare(s, variant);
+    const LevelResult result = Solve(*prepared, s, s.character->joint_count());
+    EXPECT_LT(result.optimized.mean_e, 1e-12) << VariantName(variant);
+    EXPECT_LT(result.optimized.max_vertex_error_pct, 1e-4) << VariantName(variant);
+    EXPECT_LT(result.baseline.max_e, 1e-20);
+    const Eigen::MatrixXd& kt = prepared->original_matrices();
+    for (int t = 0; t < s.motion.frame_count; ++t) {
+      for (int j = 0; j < s.character->joint_count(); ++j) {
+        const Affine34d original = kt.block<4, 3>(4 * j, 3 * t).transpose();
+        EXPECT_TRUE(result.matrices[t * s.character->joint_count() + j].cast<double>().isApprox(
+            original, 1e-5));
+      }
+    }
+  }
+}
+
+TEST(SolveLevel, LeastSquaresVariantsNeverLoseToTheBaseline) {
+  const Scene s = MakeScene();
+  const auto vpno = Prepare(s, Variant::kVPNO);
+  const auto vp = Prepare(s, Variant::kVP);
+  for (int kept = 1; kept <= s.character->joint_count(); ++kept) {
+    const LevelResult a = Solve(*vpno, s, kept);
+    for (int t = 0; t < s.motion.frame_count; ++t) {
+      EXPECT_LE(a.optimized.e[t], a.baseline.e[t] * (1 + 1e-9) + 1e-15) << kept << " " << t;
+    }
+    const LevelResult b = Solve(*vp, s, kept);
+    for (int t = 0; t < s.motion.frame_count; ++t) {
+      const double ep = b.optimized.ep_vertex[t] + b.optimized.ep_joint[t];
+      const double ep_base = b.baseline.ep_vertex[t] + b.baseline.ep_joint[t];
+      EXPECT_LE(ep, ep_base * (1 + 1e-9) + 1e-15) << kept << " " << t;
+    }
+  }
+}
+
+TEST(SolveLevel, RigidVariantsStoreRotations) {
+  const Scene s = MakeScene();
+  const auto prepared = Prepare(s, Variant::kVPNOPD);
+  const LevelResult result = Solve(*prepared, s, 4);
+  for (const Affine34f& k : result.matrices) {
+    const Eigen::Matrix3d r = k.leftCols<3>().cast<double>();
+    EXPECT_NEAR((r.transpose() * r - Eigen::Matrix3d::Identity()).norm(), 0, 1e-6);
+    EXPECT_NEAR(r.determinant(), 1.0, 1e-6);
+  }
+}
+
+TEST(SolveLevel, ResolvedTranslationBeatsTheSolvedOne) {
+  const Scene s = MakeScene();
+  SolveSettings keep;
+  keep.variant = Variant::kVPNOPD;
+  keep.resolve_rigid_translation = false;
+  const auto kept_t = *PreparedMotion::Create(s.character, s.motion, keep);
+  const auto resolved = Prepare(s, Variant::kVPNOPD);
+  for (int kept = 2; kept < s.character->joint_count(); ++kept) {
+    const LevelResult a = Solve(*resolved, s, kept);
+    const LevelResult b = Solve(*kept_t, s, kept);
+    EXPECT_LE(a.optimized.mean_e, b.optimized.mean_e * (1 + 1e-9)) << kept;
+  }
+}
+
+TEST(SolveLevel, ErrorsAreInvariantToARigidTransformOfTheMotion) {
+  Scene s = MakeScene();
+  Scene moved = s;
+  const Affine34d rigid = ComposeAffine(testing::Translation(3, -2, 7),
+                                        testing::RotationAbout(Vec3d(1, 2, 3), 1.1, Vec3d::Zero()));
+  for (Affine34d& w : moved.motion.joint_world) w = ComposeAffine(rigid, w);
+  for (Variant variant : {Variant::kVP, Variant::kVPNO, Variant::kVPPD, Variant::kVPNOPD}) {
+    const auto a = Prepare(s, variant);
+    const auto b = Prepare(moved, variant);
+    EXPECT_NEAR(a->alpha(), b->alpha(), 1e-9 * a->alpha());
+    for (int kept : {2, 5}) {
+      const LevelResult ra = Solve(*a, s, kept);
+      const LevelResult rb = Solve(*b, moved, kept);
+      EXPECT_NEAR(ra.optimized.mean_e, rb.optimized.mean_e, 1e-7 * ra.optimized.mean_e + 1e-12);
+      EXPECT_NEAR(ra.optimized.max_vertex_error_pct, rb.optimized.max_vertex_error_pct, 1e-5);
+      EXPECT_NEAR(ra.optimized.mean_normal_error_deg, rb.optimized.mean_normal_error_deg, 1e-5);
+      EXPECT_NEAR(ra.baseline.mean_e, rb.baseline.mean_e, 1e-9 * ra.baseline.mean_e);
+    }
+  }
+}
+
+TEST(SolveLevel, MaxVertexErrorIsTheExactMaximum) {
+  const Scene s = MakeScene(12);
+  const auto prepared = Prepare(s, Variant::kVPNO);
+  const Character& c = *s.character;
+  for (int kept : {1, 3, 6}) {
+    const LevelResult result = Solve(*prepared, s, kept);
+    // Brute force over every vertex and frame with the stored (float) matrices.
+    double brute = 0;
+    const auto reduced = ReduceInfluences(c.skin(), result.skeleton);
+    const Eigen::MatrixXd& kt = prepared->original_matrices();
+    for (int t = 0; t < s.motion.frame_count; ++t) {
+      for (int i = 0; i < c.vertex_count(); ++i) {
+        const Vec3d v0 = c.skin().positions[i].cast<double>();
+        Vec3d original = Vec3d::Zero(), lod = Vec3d::Zero();
+        for (uint32_t e = c.skin().influence_offsets[i]; e < c.skin().influence_offsets[i + 1]; ++e) {
+          const Affine34d k = kt.block<4, 3>(4 * c.skin().influence_joints[e], 3 * t).transpose();
+          original += c.skin().influence_weights[e] * TransformPoint(k, v0);
+        }
+        for (uint32_t e = reduced.offsets[i]; e < reduced.offsets[i + 1]; ++e) {
+          const Affine34d k = result.matrices[t * kept + reduced.slots[e]].cast<double>();
+          lod += reduced.weights[e] * TransformPoint(k, v0);
+        }
+        brute = std::max(brute, (original - lod).norm());
+      }
+    }
+    EXPECT_NEAR(result.optimized.max_vertex_error_pct, 100 * brute / c.height(), 1e-4) << kept;
+  }
+}
+
+TEST(SolveSettings, ValidateAndHash) {
+  SolveSettings a;
+  EXPECT_TRUE(a.Validate().ok());
+  SolveSettings b = a;
+  b.variant = Variant::kVP;
+  EXPECT_NE(a.Hash(), b.Hash());
+  EXPECT_EQ(a.Hash(), SolveSettings{}.Hash());
+  b = a;
+  b.regularization = 0;
+  EXPECT_FALSE(b.Validate().ok());
+  b = a;
+  b.joint_weight = -1;
+  EXPECT_FALSE(b.Validate().ok());
+  EXPECT_EQ(*ParseVariant("vpno+pd"), Variant::kVPNOPD);
+  EXPECT_FALSE(ParseVariant("vpn").ok());
+}
+
+}  // namespace
+}  // namespace motionlod::core
