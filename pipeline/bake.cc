@@ -1,0 +1,322 @@
+#include "pipeline/bake.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <map>
+#include <mutex>
+#include <optional>
+
+#include "core/reduce_skeleton.h"
+#include "core/skinning.h"
+#include "io/retarget.h"
+#include "pipeline/parallel.h"
+#include "pipeline/report.h"
+#include "proto/level_format.h"
+
+namespace motionlod::pipeline {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double SecondsSince(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+bool Cancelled(const std::atomic<bool>* cancel) {
+  return cancel != nullptr && cancel->load(std::memory_order_relaxed);
+}
+
+Status CancelledStatus() { return Status(StatusCode::kNotFound, "the bake was cancelled"); }
+
+// Solves the given kept counts in parallel into `out`, keyed by count.
+Status SolveCounts(const core::PreparedMotion& prepared, const core::JointRanking& ranking,
+                   const std::vector<int>& counts, int threads,
+                   std::map<int, core::LevelResult>& out,
+                   const std::function<void(int)>& on_done, const std::atomic<bool>* cancel) {
+  std::vector<std::optional<core::LevelResult>> results(counts.size());
+  std::vector<Status> errors(counts.size());
+  ParallelFor(
+      static_cast<int>(counts.size()), threads,
+      [&](int index) {
+        if (Cancelled(cancel)) return;
+        auto level = core::ReduceSkeletonToCount(prepared.character(), ranking, counts[index]);
+        if (!level.ok()) {
+          errors[index] = level.status();
+          return;
+        }
+        auto result = prepared.SolveLevel(*level);
+        if (!result.ok()) {
+          errors[index] = result.status();
+          return;
+        }
+        results[index] = std::move(*result);
+      },
+      on_done);
+  if (Cancelled(cancel)) return CancelledStatus();
+  for (size_t index = 0; index < counts.size(); ++index) {
+    if (!errors[index].ok()) return errors[index];
+    out.emplace(counts[index], std::move(*results[index]));
+  }
+  return Status::Ok();
+}
+
+}  // namespace
+
+Status BakeRequest::Validate() const {
+  if (!character) return InvalidArgument("no character to bake");
+  if (Status status = settings.Validate(); !status.ok()) return status;
+  if (!(fps >= 0) || fps > 1000) return InvalidArgument("fps must be in [0, 1000] (0 = the source's)");
+  for (int count : levels) {
+    if (count < 1) return InvalidArgument("every level must keep at least one joint");
+  }
+  if (all_levels && !levels.empty()) {
+    return InvalidArgument("ask for explicit levels or for all levels, not both");
+  }
+  if (!(smallest_useful_error_pct > 0)) {
+    return InvalidArgument("smallest_useful_error_pct must be positive");
+  }
+  if (threads < 0) return InvalidArgument("threads must be >= 0 (0 = one per hardware thread)");
+  return Status::Ok();
+}
+
+std::vector<int> DefaultLadder(int joint_count, int minimum) {
+  const int n = joint_count;
+  std::vector<int> ladder = {n, static_cast<int>(std::lround(0.75 * n)),
+                             static_cast<int>(std::lround(0.5 * n)),
+                             static_cast<int>(std::lround(0.25 * n))};
+  for (int& count : ladder) count = std::clamp(count, std::min(minimum, n), n);
+  std::sort(ladder.begin(), ladder.end(), std::greater<>());
+  ladder.erase(std::unique(ladder.begin(), ladder.end()), ladder.end());
+  return ladder;
+}
+
+StatusOr<BakeInputs> PrepareInputs(const BakeRequest& request) {
+  if (Status status = request.Validate(); !status.ok()) return status;
+  BakeInputs inputs;
+  const io::Asset& character_asset = *request.character;
+  inputs.warnings = character_asset.warnings();
+  auto character = core::BuildCharacter(character_asset.character());
+  if (!character.ok()) return character.status();
+  inputs.character = *character;
+  if (request.motion) {
+    auto retargeted = io::RetargetAnimation(*request.motion, request.animation, request.fps,
+                                            character_asset.character());
+    if (!retargeted.ok()) return retargeted.status();
+    inputs.motion = std::move(retargeted->motion);
+    for (const std::string& name : retargeted->unmatched_target_joints) {
+      inputs.warnings.push_back("joint '" + name + "' has no match in the motion: it keeps its bind pose");
+    }
+    for (const std::string& name : retargeted->unmatched_source_joints) {
+      inputs.warnings.push_back("the motion's joint '" + name + "' matches no joint of the character");
+    }
+  } else {
+    auto motion = character_asset.SampleAnimation(request.animation, request.fps);
+    if (!motion.ok()) return motion.status();
+    inputs.motion = std::move(*motion);
+  }
+  if (Status status = core::ValidateMotion(inputs.motion, *inputs.character); !status.ok()) {
+    return status;
+  }
+  return inputs;
+}
+
+double SkinningPassSeconds(const core::Character& character, const core::Motion& motion,
+                           int threads) {
+  const int n = character.joint_count();
+  const int p = character.vertex_count();
+  std::vector<core::Affine34d> inverse_bind(n);
+  for (int j = 0; j < n; ++j) inverse_bind[j] = core::InverseAffine(character.skeleton().bind_world[j]);
+  const int workers = std::max(1, std::min(ResolveThreads(threads), motion.frame_count));
+  struct Scratch {
+    std::vector<core::Affine34f> palette;
+    std::vector<core::Vec3f> positions, normals;
+  };
+  std::vector<Scratch> scratch(workers);
+  for (Scratch& s : scratch) {
+    s.palette.resize(n);
+    s.positions.resize(p);
+    s.normals.resize(p);
+  }
+  const auto start = Clock::now();
+  ParallelFor(workers, workers, [&](int w) {
+    Scratch& s = scratch[w];
+    for (int t = w; t < motion.frame_count; t += workers) {
+      for (int j = 0; j < n; ++j) {
+        s.palette[j] = core::ComposeAffine(motion.world(t, j), inverse_bind[j]).cast<float>();
+      }
+      const core::SkinningJob job{&character.skin(), s.palette, s.positions, s.normals};
+      (void)job.Run();
+    }
+  });
+  return SecondsSince(start);
+}
+
+StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& progress,
+                          const std::atomic<bool>* cancel) {
+  const auto start = Clock::now();
+  auto report_progress = [&](double fraction, const char* stage) {
+    if (progress) progress({std::clamp(fraction, 0.0, 1.0), stage});
+  };
+  report_progress(0.0, "import");
+  auto inputs = PrepareInputs(request);
+  if (!inputs.ok()) return inputs.status();
+  const core::Character& character = *inputs->character;
+  const core::Motion& motion = inputs->motion;
+  const int n = character.joint_count();
+  const int threads = ResolveThreads(request.threads);
+
+  report_progress(0.02, "rank");
+  auto ranking = core::RankJointsJob{&character, &motion, request.locked_joints}.Run();
+  if (!ranking.ok()) return ranking.status();
+  const int minimum = ranking->locked_count;
+
+  report_progress(0.05, "prepare");
+  auto prepared = core::PreparedMotion::Create(inputs->character, motion, request.settings);
+  if (!prepared.ok()) return prepared.status();
+  if (Cancelled(cancel)) return CancelledStatus();
+
+  std::vector<int> counts;
+  if (request.all_levels) {
+    for (int count = n; count >= minimum; --count) counts.push_back(count);
+  } else if (!request.levels.empty()) {
+    for (int count : request.levels) {
+      if (count < minimum || count > n) {
+        return InvalidArgument("level " + std::to_string(count) + " is outside [" +
+                               std::to_string(minimum) + ", " + std::to_string(n) +
+                               "]: the skeleton has " + std::to_string(n) + " joints and " +
+                               std::to_string(minimum) + " that no level removes");
+      }
+      counts.push_back(count);
+    }
+  } else {
+    counts = DefaultLadder(n, minimum);
+  }
+  std::sort(counts.begin(), counts.end(), std::greater<>());
+  counts.erase(std::unique(counts.begin(), counts.end()), counts.end());
+
+  std::map<int, core::LevelResult> solved;
+  const double solve_begin = 0.1, solve_end = request.variant_curves ? 0.6 : 0.95;
+  int solved_count = 0;
+  const auto on_level_done = [&](int) {
+    ++solved_count;
+    report_progress(solve_begin + (solve_end - solve_begin) * solved_count /
+                                      std::max<size_t>(counts.size() + 4, 1),
+                    "solve");
+  };
+  if (request.levels.empty() && !request.all_levels) {
+    // The smallest useful skeleton: bisect on the optimised maximum vertex error, which
+    // grows as joints go (not strictly, so this finds a level that meets the bound with
+    // the level below it failing).
+    const double bound = request.smallest_useful_error_pct;
+    int lo = minimum, hi = counts.back();
+    auto error_of = [&](int count) -> StatusOr<double> {
+      if (!solved.count(count)) {
+        if (Status status = SolveCounts(**prepared, *ranking, {count}, 1, solved, on_level_done, cancel);
+            !status.ok()) {
+          return status;
+        }
+      }
+      return solved.at(count).optimized.max_vertex_error_pct;
+    };
+    auto hi_error = error_of(hi);
+    if (!hi_error.ok()) return hi_error.status();
+    if (*hi_error <= bound) {
+      while (lo < hi) {
+        const int mid = lo + (hi - lo) / 2;
+        auto mid_error = error_of(mid);
+        if (!mid_error.ok()) return mid_error.status();
+        if (*mid_error <= bound) {
+          hi = mid;
+        } else {
+          lo = mid + 1;
+        }
+      }
+    }
+    counts.push_back(hi);
+    std::sort(counts.begin(), counts.end(), std::greater<>());
+    counts.erase(std::unique(counts.begin(), counts.end()), counts.end());
+  }
+  std::vector<int> pending;
+  for (int count : counts) {
+    if (!solved.count(count)) pending.push_back(count);
+  }
+  if (Status status = SolveCounts(**prepared, *ranking, pending, threads, solved, on_level_done, cancel);
+      !status.ok()) {
+    return status;
+  }
+
+  // Fig. 7: the four variants at every level, errors only.
+  std::vector<VariantCurve> curves;
+  if (request.variant_curves) {
+    for (core::Variant variant : {core::Variant::kVP, core::Variant::kVPNO, core::Variant::kVPPD,
+                                  core::Variant::kVPNOPD}) {
+      core::SolveSettings settings = request.settings;
+      settings.variant = variant;
+      auto variant_prepared = core::PreparedMotion::Create(inputs->character, motion, settings);
+      if (!variant_prepared.ok()) return variant_prepared.status();
+      std::vector<int> every;
+      for (int count = n; count >= minimum; --count) every.push_back(count);
+      std::map<int, core::LevelResult> results;
+      if (Status status = SolveCounts(**variant_prepared, *ranking, every, threads, results, {}, cancel);
+          !status.ok()) {
+        return status;
+      }
+      VariantCurve curve{variant, {}};
+      for (int count : every) {
+        const core::LevelResult& r = results.at(count);
+        curve.points.push_back({count, r.optimized.mean_e, r.baseline.mean_e,
+                                r.optimized.max_vertex_error_pct});
+      }
+      curves.push_back(std::move(curve));
+      report_progress(solve_end + 0.35 * curves.size() / 4.0, "variant curves");
+    }
+  }
+  if (Cancelled(cancel)) return CancelledStatus();
+
+  report_progress(0.96, "encode");
+  proto::LevelSetData data;
+  data.variant_name = core::VariantName(request.settings.variant);
+  data.flags = core::IsRigid(request.settings.variant) ? proto::kLevelSetFlagRigid : 0;
+  data.algorithm_version = core::kAlgorithmVersion;
+  data.frame_count = static_cast<uint32_t>(motion.frame_count);
+  data.fps = motion.fps;
+  data.source_hash = request.source_hash;
+  data.settings_hash = request.settings.Hash();
+  data.joint_names = character.skeleton().joint_names;
+  data.parents.assign(character.skeleton().parents.begin(), character.skeleton().parents.end());
+  for (int count : counts) {
+    const core::LevelResult& r = solved.at(count);
+    proto::LevelData level;
+    level.kept_joints.assign(r.skeleton.kept_joints.begin(), r.skeleton.kept_joints.end());
+    level.joint_map.assign(r.skeleton.joint_to_slot.begin(), r.skeleton.joint_to_slot.end());
+    level.figures = LevelFiguresOf(r.optimized);
+    level.matrices.resize(r.matrices.size() * proto::kMatrixFloats);
+    for (size_t q = 0; q < r.matrices.size(); ++q) {
+      // Row-major 3x4: Eigen stores column-major, so copy element by element.
+      for (int row = 0; row < 3; ++row) {
+        for (int col = 0; col < 4; ++col) level.matrices[q * 12 + row * 4 + col] = r.matrices[q](row, col);
+      }
+    }
+    data.levels.push_back(std::move(level));
+  }
+  auto encoded = proto::EncodeLevelSet(data);
+  if (!encoded.ok()) return encoded.status();
+  const double bake_seconds = SecondsSince(start);
+
+  report_progress(0.98, "measure");
+  ReportInputs report_inputs{request, character, motion, *ranking, **prepared, counts, solved, curves};
+  report_inputs.bake_seconds = bake_seconds;
+  report_inputs.skinning_pass_seconds = SkinningPassSeconds(character, motion, threads);
+  report_inputs.threads = threads;
+  report_inputs.warnings = inputs->warnings;
+
+  BakeOutput output;
+  output.level_set = std::move(*encoded);
+  output.report = BuildReport(report_inputs);
+  output.warnings = std::move(inputs->warnings);
+  report_progress(1.0, "done");
+  return output;
+}
+
+}  // namespace motionlod::pipeline

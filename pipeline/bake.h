@@ -1,0 +1,87 @@
+// The bake: from imported assets to an encoded level set and its report. Shared by the
+// `motionlod` tool and the daemon. Runs the core's jobs on a pool of threads (the core
+// itself has none) and reports progress through a callback; never logs.
+#pragma once
+
+#include <array>
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "base/status.h"
+#include "core/character.h"
+#include "core/motion.h"
+#include "core/rank_joints.h"
+#include "core/solve_levels.h"
+#include "io/asset.h"
+
+namespace motionlod::pipeline {
+
+struct BakeRequest {
+  std::shared_ptr<const io::Asset> character;
+  // A separate motion file retargeted onto the character by joint name; null to use
+  // the character's own animation.
+  std::shared_ptr<const io::Asset> motion;
+  std::string animation;  // "" = the first animation of the motion source
+  double fps = 0;         // 0 = the source's rate
+  // Kept joint counts, any order; empty = the default ladder (full, ~3/4, ~1/2, ~1/4 and
+  // the smallest useful skeleton). all_levels: every count from n down to the minimum.
+  std::vector<int> levels;
+  bool all_levels = false;
+  std::vector<std::string> locked_joints;  // never removed (sockets, IK targets)
+  core::SolveSettings settings;
+  // The smallest useful skeleton is the fewest joints whose optimised maximum vertex
+  // error stays within this percentage of the character's height.
+  double smallest_useful_error_pct = 10.0;
+  // Also solve the four variants at every level (errors only) for the fig. 7 plot.
+  bool variant_curves = false;
+  int threads = 0;  // 0 = one per hardware thread
+  std::array<uint8_t, 32> source_hash{};  // SHA-256 of the inputs, stored in the level set
+  std::string character_label, motion_label;  // for the report (file names)
+
+  Status Validate() const;
+};
+
+struct BakeProgress {
+  double fraction = 0;  // 0..1
+  const char* stage = "";
+};
+// Called from the thread that runs Bake, never concurrently.
+using ProgressCallback = std::function<void(const BakeProgress&)>;
+
+struct BakeOutput {
+  std::string level_set;   // proto level-set file
+  nlohmann::json report;   // report.json
+  std::vector<std::string> warnings;
+};
+
+// Errors: the importer's and the core's Status, kInvalidArgument for bad requests, and
+// kNotFound ("cancelled") when *cancel becomes true.
+StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& progress = {},
+                          const std::atomic<bool>* cancel = nullptr);
+
+// The character and motion a request bakes, built and validated; used by Bake and `rank`.
+struct BakeInputs {
+  std::shared_ptr<const core::Character> character;
+  core::Motion motion;
+  std::vector<std::string> warnings;
+};
+StatusOr<BakeInputs> PrepareInputs(const BakeRequest& request);
+
+// Seconds of one plain skinning pass over the whole motion (palette K_j(t) = M_j(t) M0_j^-1
+// in float, then positions and normals of every vertex) on `threads` threads: the
+// yardstick the bake time is compared with.
+double SkinningPassSeconds(const core::Character& character, const core::Motion& motion,
+                           int threads);
+
+// The default ladder for n joints and the minimum the locks allow: n, ~3n/4, ~n/2, ~n/4,
+// clamped to [minimum, n], duplicates removed, finest first (the smallest useful level is
+// added by Bake once it is known).
+std::vector<int> DefaultLadder(int joint_count, int minimum);
+
+}  // namespace motionlod::pipeline

@@ -1,0 +1,146 @@
+#include "pipeline/report.h"
+
+#include <cmath>
+#include <limits>
+#include <numeric>
+
+#include "core/level_selection.h"
+
+namespace motionlod::pipeline {
+namespace {
+
+using nlohmann::json;
+
+double Mean(const std::vector<double>& values) {
+  return values.empty() ? 0.0 : std::accumulate(values.begin(), values.end(), 0.0) / values.size();
+}
+
+// JSON has no infinity: an exact level's pixel limit is null.
+json FiniteOrNull(double value) { return std::isfinite(value) ? json(value) : json(nullptr); }
+
+json ErrorsJson(const core::LevelErrors& e) {
+  return {{"mean_E", e.mean_e},
+          {"max_E", e.max_e},
+          {"max_E_frame", e.max_e_frame},
+          {"mean_Ep_vertex", Mean(e.ep_vertex)},
+          {"mean_Ep_joint", Mean(e.ep_joint)},
+          {"mean_En_vertex", Mean(e.en_vertex)},
+          {"mean_En_joint", Mean(e.en_joint)},
+          {"max_vertex_error_pct", e.max_vertex_error_pct},
+          {"max_vertex_frame", e.max_vertex_frame},
+          {"max_vertex_index", e.max_vertex_index},
+          {"rms_vertex_error_pct", e.rms_vertex_error_pct},
+          {"mean_vertex_error_pct", e.mean_vertex_error_pct},
+          {"mean_normal_error_deg", e.mean_normal_error_deg}};
+}
+
+}  // namespace
+
+proto::LevelFigures LevelFiguresOf(const core::LevelErrors& errors) {
+  proto::LevelFigures figures;
+  figures.max_vertex_error_pct = static_cast<float>(errors.max_vertex_error_pct);
+  figures.mean_vertex_error_pct = static_cast<float>(errors.mean_vertex_error_pct);
+  figures.mean_normal_error_deg = static_cast<float>(errors.mean_normal_error_deg);
+  figures.mean_E = static_cast<float>(errors.mean_e);
+  figures.max_px_for_1px_error =
+      static_cast<float>(core::MaxPixelHeightForBudget(errors.max_vertex_error_pct / 100.0, 1.0));
+  return figures;
+}
+
+json RankingTable(const core::Character& character, const core::JointRanking& ranking) {
+  json rows = json::array();
+  for (size_t r = 0; r < ranking.removal_order.size(); ++r) {
+    const int j = ranking.removal_order[r];
+    rows.push_back({{"rank", r + 1},
+                    {"joint", character.skeleton().joint_names[j]},
+                    {"index", j},
+                    {"hierarchical", ranking.hierarchical[j]},
+                    {"rotational", ranking.rotational[j]},
+                    {"priority", FiniteOrNull(ranking.priority[j])},
+                    {"removable", std::isfinite(ranking.priority[j])}});
+  }
+  return rows;
+}
+
+json BuildReport(const ReportInputs& in) {
+  const core::SolveSettings& settings = in.request.settings;
+  json report;
+  report["format"] = "motionlod-report";
+  report["version"] = kReportVersion;
+  report["algorithm_version"] = core::kAlgorithmVersion;
+  report["character"] = {{"name", in.character.name()},
+                         {"source", in.request.character_label},
+                         {"joints", in.character.joint_count()},
+                         {"vertices", in.character.vertex_count()},
+                         {"triangles", in.character.skin().triangles.size()},
+                         {"height", in.character.height()},
+                         {"proxy_skin", in.request.character->has_proxy_skin()}};
+  report["motion"] = {{"name", in.motion.name},
+                      {"source", in.request.motion ? in.request.motion_label : in.request.character_label},
+                      {"frames", in.motion.frame_count},
+                      {"fps", in.motion.fps},
+                      {"seconds", (in.motion.frame_count - 1) / in.motion.fps}};
+  report["variant"] = core::VariantName(settings.variant);
+  report["settings"] = {{"resolve_rigid_translation", settings.resolve_rigid_translation},
+                        {"joint_weight", settings.joint_weight},
+                        {"regularization", settings.regularization},
+                        {"sample_frames", settings.sample_frames},
+                        {"sample_vertices", settings.sample_vertices},
+                        {"alpha", in.prepared.alpha()},
+                        {"beta", in.prepared.beta()},
+                        {"locked_joints", in.request.locked_joints},
+                        {"settings_hash", std::to_string(settings.Hash())}};
+  report["units"] = {{"E", "eq. (2): alpha Ep + beta En, alpha and beta normalise by the root-only skeleton's maximum"},
+                     {"vertex_error_pct", "percent of the character's height (longest side of the bind-pose bounding box)"},
+                     {"normal_error_deg", "degrees between the original and the level's blended normals"},
+                     {"max_px_for_1px_error", "pixels: tallest on-screen character height keeping the max vertex error within 1 px; null = exact"}};
+  report["timing"] = {{"bake_seconds", in.bake_seconds},
+                      {"skinning_pass_seconds", in.skinning_pass_seconds},
+                      {"bake_over_skinning_pass", in.skinning_pass_seconds > 0 ? in.bake_seconds / in.skinning_pass_seconds : 0.0},
+                      {"threads", in.threads}};
+  json levels = json::array();
+  for (int count : in.counts) {
+    const core::LevelResult& r = in.levels.at(count);
+    json removed = json::array();
+    std::vector<bool> kept(in.character.joint_count(), false);
+    for (int j : r.skeleton.kept_joints) kept[j] = true;
+    for (int j = 0; j < in.character.joint_count(); ++j) {
+      if (!kept[j]) removed.push_back(in.character.skeleton().joint_names[j]);
+    }
+    const double max_px = core::MaxPixelHeightForBudget(r.optimized.max_vertex_error_pct / 100.0, 1.0);
+    json level = {{"joints", count},
+                  {"removed", removed},
+                  {"mean_E", r.optimized.mean_e},
+                  {"baseline_mean_E", r.baseline.mean_e},
+                  {"max_vertex_error_pct", r.optimized.max_vertex_error_pct},
+                  {"baseline_max_vertex_error_pct", r.baseline.max_vertex_error_pct},
+                  {"mean_vertex_error_pct", r.optimized.mean_vertex_error_pct},
+                  {"baseline_mean_vertex_error_pct", r.baseline.mean_vertex_error_pct},
+                  {"mean_normal_error_deg", r.optimized.mean_normal_error_deg},
+                  {"baseline_mean_normal_error_deg", r.baseline.mean_normal_error_deg},
+                  {"max_px_for_1px_error", FiniteOrNull(max_px)},
+                  {"optimized", ErrorsJson(r.optimized)},
+                  {"baseline", ErrorsJson(r.baseline)}};
+    levels.push_back(std::move(level));
+  }
+  report["levels"] = std::move(levels);
+  if (!in.curves.empty()) {
+    json curves = json::object();
+    for (const VariantCurve& curve : in.curves) {
+      json points = json::array();
+      for (const CurvePoint& p : curve.points) {
+        points.push_back({{"joints", p.joints},
+                          {"mean_E", p.mean_e},
+                          {"baseline_mean_E", p.baseline_mean_e},
+                          {"max_vertex_error_pct", p.max_vertex_error_pct}});
+      }
+      curves[core::VariantName(curve.variant)] = std::move(points);
+    }
+    report["variant_curves"] = std::move(curves);
+  }
+  report["ranking"] = RankingTable(in.character, in.ranking);
+  report["warnings"] = in.warnings;
+  return report;
+}
+
+}  // namespace motionlod::pipeline

@@ -1,0 +1,56 @@
+// report.json: what a bake produced and how good it is. Field names and units are
+// documented in docs/report.md.
+#pragma once
+
+#include <map>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "core/character.h"
+#include "core/motion.h"
+#include "core/rank_joints.h"
+#include "core/solve_levels.h"
+#include "pipeline/bake.h"
+#include "proto/level_format.h"
+
+namespace motionlod::pipeline {
+
+inline constexpr int kReportVersion = 1;
+
+struct CurvePoint {
+  int joints = 0;
+  double mean_e = 0;
+  double baseline_mean_e = 0;
+  double max_vertex_error_pct = 0;
+};
+struct VariantCurve {
+  core::Variant variant;
+  std::vector<CurvePoint> points;  // every level, finest first
+};
+
+struct ReportInputs {
+  const BakeRequest& request;
+  const core::Character& character;
+  const core::Motion& motion;
+  const core::JointRanking& ranking;
+  const core::PreparedMotion& prepared;
+  const std::vector<int>& counts;  // finest first
+  const std::map<int, core::LevelResult>& levels;
+  const std::vector<VariantCurve>& curves;
+  double bake_seconds = 0;
+  double skinning_pass_seconds = 0;
+  int threads = 1;
+  std::vector<std::string> warnings;
+};
+
+// The level-file figures of a level's optimised errors.
+proto::LevelFigures LevelFiguresOf(const core::LevelErrors& errors);
+
+nlohmann::json BuildReport(const ReportInputs& inputs);
+
+// The joint priority table (fig. 2) as JSON rows, lowest priority first.
+nlohmann::json RankingTable(const core::Character& character, const core::JointRanking& ranking);
+
+}  // namespace motionlod::pipeline

@@ -1,0 +1,282 @@
+// motionlod: the command-line bake tool.
+//   motionlod info CHARACTER
+//   motionlod rank CHARACTER [--motion M] [--animation NAME] [--fps F] [--lock J,...] [--json]
+//   motionlod bake CHARACTER [--motion M] [--animation NAME] [--levels 30,20,10,5 | --all-levels]
+//                  [--variant vpno+pd] [--fps F] [--lock J,...] [--threads N] [--curves] --out DIR
+//   motionlod plot REPORT.json -o FIG.svg
+// Exit codes: 0 success, 2 bad input (usage, unreadable or invalid files, impossible
+// requests), 1 failure to write the output.
+#include <unistd.h>
+
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+#include <string>
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include "core/solve_levels.h"
+#include "io/asset.h"
+#include "io/sha256.h"
+#include "pipeline/bake.h"
+#include "pipeline/report.h"
+#include "tools/atomic_output.h"
+#include "tools/plot_svg.h"
+
+namespace motionlod::tools {
+namespace {
+
+constexpr int kExitOutput = 1;
+constexpr int kExitBadInput = 2;
+
+int Fail(const Status& status, int code = kExitBadInput) {
+  std::cerr << "motionlod: error: " << status.message() << "\n";
+  return code;
+}
+
+struct CommonOptions {
+  std::string character;
+  std::string motion;
+  std::string animation;
+  double fps = 0;
+  std::vector<std::string> locked;
+  int threads = 0;
+};
+
+void AddCommon(CLI::App* app, CommonOptions& o) {
+  app->add_option("CHARACTER", o.character, "character file (glTF/GLB, FBX, Collada, BVH, X, SMD)")
+      ->required();
+  app->add_option("--motion", o.motion, "separate motion file, retargeted onto the character by joint name");
+  app->add_option("--animation", o.animation, "animation name (default: the first)");
+  app->add_option("--fps", o.fps, "sampling rate in frames per second (default: the source's)")
+      ->check(CLI::Range(0.0, 1000.0));
+  app->add_option("--lock", o.locked, "joints no level removes (sockets, IK targets)")->delimiter(',');
+  app->add_option("--threads", o.threads, "worker threads (default: one per core)")->check(CLI::NonNegativeNumber);
+}
+
+StatusOr<std::shared_ptr<const io::Asset>> Load(const std::string& path) {
+  auto asset = io::LoadAssetFile(path);
+  if (!asset.ok()) {
+    return Status(asset.status().code(), "'" + path + "': " + asset.status().message());
+  }
+  return asset;
+}
+
+std::string ReadFileOrEmpty(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream bytes;
+  bytes << in.rdbuf();
+  return bytes.str();
+}
+
+// SHA-256 over the input files' digests and the sampling choices.
+std::array<uint8_t, 32> SourceHash(const CommonOptions& o) {
+  std::string key = "character:" + io::Sha256Hex(ReadFileOrEmpty(o.character));
+  if (!o.motion.empty()) key += ";motion:" + io::Sha256Hex(ReadFileOrEmpty(o.motion));
+  key += ";animation:" + o.animation + ";fps:" + std::to_string(o.fps);
+  const std::string hex = io::Sha256Hex(key);
+  std::array<uint8_t, 32> digest{};
+  for (size_t q = 0; q < digest.size(); ++q) digest[q] = static_cast<uint8_t>(std::stoi(hex.substr(2 * q, 2), nullptr, 16));
+  return digest;
+}
+
+StatusOr<pipeline::BakeRequest> MakeRequest(const CommonOptions& o) {
+  pipeline::BakeRequest request;
+  auto character = Load(o.character);
+  if (!character.ok()) return character.status();
+  request.character = *character;
+  if (!o.motion.empty()) {
+    auto motion = Load(o.motion);
+    if (!motion.ok()) return motion.status();
+    request.motion = *motion;
+  }
+  request.animation = o.animation;
+  request.fps = o.fps;
+  request.locked_joints = o.locked;
+  request.threads = o.threads;
+  request.character_label = std::filesystem::path(o.character).filename().string();
+  request.motion_label = std::filesystem::path(o.motion).filename().string();
+  return request;
+}
+
+class ProgressBar {
+ public:
+  ProgressBar() : enabled_(::isatty(STDERR_FILENO) == 1) {}
+  void Update(const pipeline::BakeProgress& p) {
+    if (!enabled_) return;
+    const int width = 30;
+    const int filled = static_cast<int>(p.fraction * width + 0.5);
+    std::fprintf(stderr, "\r[%s%s] %3d%% %-16s", std::string(filled, '#').c_str(),
+                 std::string(width - filled, ' ').c_str(), static_cast<int>(p.fraction * 100 + 0.5),
+                 p.stage);
+    std::fflush(stderr);
+  }
+  ~ProgressBar() {
+    if (enabled_) std::fprintf(stderr, "\r%60s\r", "");
+  }
+
+ private:
+  bool enabled_;
+};
+
+int RunInfo(const std::string& path) {
+  auto asset = Load(path);
+  if (!asset.ok()) return Fail(asset.status());
+  const core::RawCharacter& c = (*asset)->character();
+  std::cout << "joints " << c.skeleton.parents.size() << ", vertices " << c.skin.positions.size()
+            << ", triangles " << c.skin.triangles.size()
+            << ((*asset)->has_proxy_skin() ? " (proxy skin)" : "") << "\n";
+  for (const io::AnimationInfo& a : (*asset)->animations()) {
+    std::printf("animation '%s': %.3f s, %d frames at %.3g fps\n", a.name.c_str(), a.duration_seconds,
+                a.source_frame_count, a.source_fps);
+  }
+  for (const std::string& w : (*asset)->warnings()) std::cout << "warning: " << w << "\n";
+  return 0;
+}
+
+int RunRank(const CommonOptions& o, bool as_json) {
+  auto request = MakeRequest(o);
+  if (!request.ok()) return Fail(request.status());
+  auto inputs = pipeline::PrepareInputs(*request);
+  if (!inputs.ok()) return Fail(inputs.status());
+  auto ranking = core::RankJointsJob{inputs->character.get(), &inputs->motion, o.locked}.Run();
+  if (!ranking.ok()) return Fail(ranking.status());
+  const nlohmann::json table = pipeline::RankingTable(*inputs->character, *ranking);
+  if (as_json) {
+    std::cout << table.dump(2) << "\n";
+    return 0;
+  }
+  std::printf("%4s  %-28s %12s %12s %12s\n", "rank", "joint", "hierarchical", "rotational", "priority");
+  for (const auto& row : table) {
+    const std::string priority = row["priority"].is_null()
+                                     ? std::string(row["index"] == 0 ? "root" : "locked")
+                                     : std::to_string(row["priority"].get<double>());
+    std::printf("%4d  %-28s %12.4f %12.4f %12s\n", row["rank"].get<int>(),
+                row["joint"].get<std::string>().c_str(), row["hierarchical"].get<double>(),
+                row["rotational"].get<double>(), priority.c_str());
+  }
+  return 0;
+}
+
+void PrintLevelTable(const nlohmann::json& report) {
+  std::printf("%s: %d joints, %d vertices; %s: %d frames at %.4g fps; variant %s\n",
+              report["character"]["source"].get<std::string>().c_str(),
+              report["character"]["joints"].get<int>(), report["character"]["vertices"].get<int>(),
+              report["motion"]["name"].get<std::string>().c_str(), report["motion"]["frames"].get<int>(),
+              report["motion"]["fps"].get<double>(), report["variant"].get<std::string>().c_str());
+  std::printf("%6s %10s %10s %9s %9s %9s %9s %12s\n", "joints", "mean_E", "base_E", "max_err%",
+              "base_max%", "mean_err%", "normal°", "max_px@1px");
+  for (const auto& level : report["levels"]) {
+    const std::string px = level["max_px_for_1px_error"].is_null()
+                               ? "exact"
+                               : std::to_string(static_cast<int>(level["max_px_for_1px_error"].get<double>()));
+    std::printf("%6d %10.3g %10.3g %9.3f %9.3f %9.3f %9.2f %12s\n", level["joints"].get<int>(),
+                level["mean_E"].get<double>(), level["baseline_mean_E"].get<double>(),
+                level["max_vertex_error_pct"].get<double>(),
+                level["baseline_max_vertex_error_pct"].get<double>(),
+                level["mean_vertex_error_pct"].get<double>(), level["mean_normal_error_deg"].get<double>(),
+                px.c_str());
+  }
+  std::printf("bake %.3f s, one skinning pass %.3f s (%d threads)\n",
+              report["timing"]["bake_seconds"].get<double>(),
+              report["timing"]["skinning_pass_seconds"].get<double>(), report["timing"]["threads"].get<int>());
+}
+
+int RunBake(const CommonOptions& o, const std::vector<int>& levels, bool all_levels,
+            const std::string& variant, bool keep_pd_translation, bool curves, const std::string& out) {
+  auto parsed_variant = core::ParseVariant(variant);
+  if (!parsed_variant.ok()) return Fail(parsed_variant.status());
+  auto request = MakeRequest(o);
+  if (!request.ok()) return Fail(request.status());
+  request->levels = levels;
+  request->all_levels = all_levels;
+  request->settings.variant = *parsed_variant;
+  request->settings.resolve_rigid_translation = !keep_pd_translation;
+  request->variant_curves = curves;
+  request->source_hash = SourceHash(o);
+  for (const std::string& w : request->character->warnings()) std::cerr << "motionlod: warning: " << w << "\n";
+  std::optional<pipeline::BakeOutput> output;
+  {
+    ProgressBar bar;
+    auto baked = pipeline::Bake(*request, [&](const pipeline::BakeProgress& p) { bar.Update(p); });
+    if (!baked.ok()) return Fail(baked.status());
+    output = std::move(*baked);
+  }
+  for (const std::string& w : output->warnings) std::cerr << "motionlod: warning: " << w << "\n";
+  if (Status status = WriteDirectoryAtomically(
+          out, {{"levels.mlod", output->level_set}, {"report.json", output->report.dump(2) + "\n"}});
+      !status.ok()) {
+    return Fail(status, kExitOutput);
+  }
+  PrintLevelTable(output->report);
+  std::printf("wrote %s/levels.mlod (%zu bytes) and %s/report.json\n", out.c_str(),
+              output->level_set.size(), out.c_str());
+  return 0;
+}
+
+int RunPlot(const std::string& report_path, const std::string& out) {
+  std::ifstream in(report_path);
+  if (!in) return Fail(InvalidArgument("cannot read '" + report_path + "'"));
+  const nlohmann::json report = nlohmann::json::parse(in, nullptr, /*allow_exceptions=*/false);
+  if (report.is_discarded()) return Fail(InvalidArgument("'" + report_path + "' is not valid JSON"));
+  auto svg = RenderErrorPlotSvg(report);
+  if (!svg.ok()) return Fail(svg.status());
+  if (Status status = WriteFileAtomically(out, *svg); !status.ok()) return Fail(status, kExitOutput);
+  std::printf("wrote %s\n", out.c_str());
+  return 0;
+}
+
+int Main(int argc, char** argv) {
+  CLI::App app{"motionlod: Motion LoD bake tool (Ahn, Oh, Wohn 2006)"};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", "motionlod 0.1.0");
+
+  std::string info_path;
+  CLI::App* info = app.add_subcommand("info", "list a file's joints, vertices and animations");
+  info->add_option("FILE", info_path, "character or motion file")->required();
+
+  CommonOptions rank_options;
+  bool rank_json = false;
+  CLI::App* rank = app.add_subcommand("rank", "print the joint removal priority table (fig. 2)");
+  AddCommon(rank, rank_options);
+  rank->add_flag("--json", rank_json, "print JSON");
+
+  CommonOptions bake_options;
+  std::vector<int> levels;
+  bool all_levels = false, keep_pd_translation = false, curves = false;
+  std::string variant = "vpno+pd", out;
+  CLI::App* bake = app.add_subcommand("bake", "bake a level set and its report");
+  AddCommon(bake, bake_options);
+  auto* levels_option = bake->add_option("--levels", levels, "kept joint counts, e.g. 30,20,10,5")->delimiter(',');
+  bake->add_flag("--all-levels", all_levels, "every level from all joints down to the root")->excludes(levels_option);
+  bake->add_option("--variant", variant, "vp, vpno, vp+pd or vpno+pd (rigid)")->capture_default_str();
+  bake->add_flag("--keep-pd-translation", keep_pd_translation,
+                 "rigid variants: keep the solved translation instead of re-solving it");
+  bake->add_flag("--curves", curves, "also solve the four variants at every level for `plot`");
+  bake->add_option("--out", out, "output directory (levels.mlod, report.json)")->required();
+
+  std::string report_path, svg_path;
+  CLI::App* plot = app.add_subcommand("plot", "draw mean E(t) against kept joints (fig. 7) as SVG");
+  plot->add_option("REPORT", report_path, "report.json of a bake")->required();
+  plot->add_option("-o,--out", svg_path, "SVG file to write")->required();
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    const int code = app.exit(e);
+    return code == 0 ? 0 : kExitBadInput;
+  }
+  if (info->parsed()) return RunInfo(info_path);
+  if (rank->parsed()) return RunRank(rank_options, rank_json);
+  if (bake->parsed()) {
+    return RunBake(bake_options, levels, all_levels, variant, keep_pd_translation, curves, out);
+  }
+  return RunPlot(report_path, svg_path);
+}
+
+}  // namespace
+}  // namespace motionlod::tools
+
+int main(int argc, char** argv) { return motionlod::tools::Main(argc, argv); }
