@@ -1,0 +1,873 @@
+#include "proto/level_format.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <limits>
+#include <type_traits>
+#include <utility>
+
+#include "proto/checksum.h"
+#include "proto/level_format_internal.h"
+#include "proto/utf8.h"
+
+namespace motionlod::proto {
+
+using internal::ExtraSection;
+using internal::kDirectoryEntrySize;
+using internal::kGlobalSectionCount;
+using internal::kHeaderSize;
+using internal::kLevelRecordSize;
+using internal::kNoLevel;
+using internal::kSectionsPerLevel;
+using internal::kTrailerSize;
+using internal::SectionKind;
+using internal::WriterOptions;
+
+namespace {
+
+// ---------------------------------------------------------------------------------
+// Little helpers: messages, loads and stores at any alignment, overflow-safe sizes.
+
+void Append(std::string& out, std::string_view text) { out.append(text); }
+void Append(std::string& out, const char* text) { out.append(text); }
+template <typename T>
+requires std::is_arithmetic_v<T>
+void Append(std::string& out, T value) {
+  if constexpr (std::is_floating_point_v<T>) {
+    char buffer[32];
+    std::snprintf(buffer, sizeof buffer, "%.9g", static_cast<double>(value));
+    out.append(buffer);
+  } else {
+    out.append(std::to_string(value));
+  }
+}
+template <typename... Args>
+std::string StrCat(const Args&... args) {
+  std::string out;
+  (Append(out, args), ...);
+  return out;
+}
+
+template <typename T>
+T Load(const std::byte* p) {
+  T value;
+  std::memcpy(&value, p, sizeof value);
+  return value;
+}
+template <typename T>
+void Store(std::byte* p, T value) {
+  std::memcpy(p, &value, sizeof value);
+}
+
+constexpr uint64_t kAlignment = kLevelFormatAlignment;
+
+// Rounds up to the alignment; callers guarantee x <= a multiple of 16 that fits.
+constexpr uint64_t AlignUp(uint64_t x) { return (x + (kAlignment - 1)) & ~(kAlignment - 1); }
+
+bool AllZero(std::span<const std::byte> bytes) {
+  return std::all_of(bytes.begin(), bytes.end(), [](std::byte b) { return b == std::byte{0}; });
+}
+
+// A float whose exponent bits are all set is an infinity or a NaN.
+bool IsFiniteBits(float value) {
+  return (std::bit_cast<uint32_t>(value) & 0x7F800000u) != 0x7F800000u;
+}
+
+// ---------------------------------------------------------------------------------
+// The content of a level set as spans, whether it comes from LevelSetData (encode),
+// from a decoded buffer (validation after decode) or from a view (extract).
+
+struct LevelSource {
+  std::span<const uint16_t> kept_joints;
+  std::span<const uint16_t> joint_map;
+  LevelFigures figures;
+  std::span<const float> matrices;
+};
+
+struct LevelSetSource {
+  uint32_t flags = 0;
+  uint32_t algorithm_version = 0;
+  uint32_t frame_count = 0;
+  double fps = 0;
+  std::array<uint8_t, 32> source_hash{};
+  uint64_t settings_hash = 0;
+  std::string_view variant_name;
+  std::vector<std::string_view> joint_names;
+  std::span<const int32_t> parents;
+  std::vector<LevelSource> levels;
+};
+
+LevelSetSource SourceOf(const LevelSetData& data) {
+  LevelSetSource source;
+  source.flags = data.flags;
+  source.algorithm_version = data.algorithm_version;
+  source.frame_count = data.frame_count;
+  source.fps = data.fps;
+  source.source_hash = data.source_hash;
+  source.settings_hash = data.settings_hash;
+  source.variant_name = data.variant_name;
+  source.joint_names.assign(data.joint_names.begin(), data.joint_names.end());
+  source.parents = data.parents;
+  source.levels.reserve(data.levels.size());
+  for (const LevelData& level : data.levels) {
+    source.levels.push_back({level.kept_joints, level.joint_map, level.figures, level.matrices});
+  }
+  return source;
+}
+
+// The header and skeleton of `view`, without levels.
+LevelSetSource HeaderSourceOf(const LevelSetView& view) {
+  LevelSetSource source;
+  source.flags = view.flags() & kKnownLevelSetFlags;
+  source.algorithm_version = view.algorithm_version();
+  source.frame_count = view.frame_count();
+  source.fps = view.fps();
+  source.source_hash = view.source_hash();
+  source.settings_hash = view.settings_hash();
+  source.variant_name = view.variant_name();
+  source.joint_names.assign(view.joint_names().begin(), view.joint_names().end());
+  source.parents = view.parents();
+  return source;
+}
+
+LevelSource SourceOf(const LevelView& level) {
+  return {level.kept_joints(), level.joint_map(), level.figures(), level.matrices()};
+}
+
+// ---------------------------------------------------------------------------------
+// Semantic validation, shared by the encoder (kInvalidArgument) and the decoder
+// (kDataLoss): returns the first problem, or an empty string.
+
+std::string CheckName(std::string_view what, std::string_view name, bool allow_empty) {
+  if (name.empty() && !allow_empty) return StrCat(what, " is empty");
+  if (name.size() > kMaxNameBytes) {
+    return StrCat(what, " is ", name.size(), " bytes long (at most ", kMaxNameBytes, ")");
+  }
+  if (!IsValidUtf8(name)) return StrCat(what, " is not valid UTF-8");
+  if (name.find('\0') != std::string_view::npos) return StrCat(what, " contains a NUL byte");
+  return {};
+}
+
+std::string CheckSkeleton(const LevelSetSource& source) {
+  const size_t n = source.parents.size();
+  if (n == 0) return "the skeleton has no joint";
+  if (n > kMaxJointCount) {
+    return StrCat("the skeleton has ", n, " joints (at most ", kMaxJointCount, ")");
+  }
+  if (source.joint_names.size() != n) {
+    return StrCat(source.joint_names.size(), " joint names for ", n, " parents");
+  }
+  if (source.parents[0] != -1) {
+    return StrCat("joint 0 has parent ", source.parents[0],
+                  "; joint 0 must be the root (parent -1)");
+  }
+  for (size_t j = 1; j < n; ++j) {
+    const int32_t parent = source.parents[j];
+    if (parent < 0 || static_cast<size_t>(parent) >= j) {
+      return StrCat("joint ", j, " has parent ", parent,
+                    "; parents must be topological (0 <= parent < joint) with joint 0 the "
+                    "single root");
+    }
+  }
+  for (size_t j = 0; j < n; ++j) {
+    std::string problem = CheckName(StrCat("the name of joint ", j), source.joint_names[j],
+                                    /*allow_empty=*/false);
+    if (!problem.empty()) return problem;
+  }
+  std::vector<std::string_view> sorted = source.joint_names;
+  std::sort(sorted.begin(), sorted.end());
+  const auto duplicate = std::adjacent_find(sorted.begin(), sorted.end());
+  if (duplicate != sorted.end()) {
+    return StrCat("two joints are named \"", *duplicate, "\"");
+  }
+  return {};
+}
+
+std::string CheckFigures(size_t l, const LevelFigures& f) {
+  const std::pair<const char*, float> finite_figures[] = {
+      {"max_vertex_error_pct", f.max_vertex_error_pct},
+      {"mean_vertex_error_pct", f.mean_vertex_error_pct},
+      {"mean_normal_error_deg", f.mean_normal_error_deg},
+      {"mean_E", f.mean_E},
+  };
+  for (const auto& [name, value] : finite_figures) {
+    if (!(std::isfinite(value) && value >= 0)) {
+      return StrCat("level ", l, ": ", name, " is ", value, " (finite and >= 0 expected)");
+    }
+  }
+  if (!(f.max_px_for_1px_error >= 0)) {  // +inf allowed, NaN not
+    return StrCat("level ", l, ": max_px_for_1px_error is ", f.max_px_for_1px_error,
+                  " (>= 0 or +inf expected)");
+  }
+  return {};
+}
+
+// The slots of `kept_joints` as ComputeJointMap and the map check both need them:
+// problems with the kept list itself.
+std::string CheckKeptJoints(size_t l, size_t n, std::span<const uint16_t> kept) {
+  if (kept.empty()) return StrCat("level ", l, " keeps no joint");
+  if (kept.size() > n) {
+    return StrCat("level ", l, " keeps ", kept.size(), " joints of ", n);
+  }
+  if (kept[0] != 0) return StrCat("level ", l, " does not keep the root (joint 0)");
+  for (size_t s = 1; s < kept.size(); ++s) {
+    if (kept[s] <= kept[s - 1]) {
+      return StrCat("level ", l, ": kept joints are not strictly ascending at slot ", s, " (",
+                    kept[s - 1], " then ", kept[s], ")");
+    }
+  }
+  if (kept.back() >= n) {
+    return StrCat("level ", l, ": kept joint ", kept.back(), " is out of range (n = ", n, ")");
+  }
+  return {};
+}
+
+std::string CheckJointMap(size_t l, std::span<const int32_t> parents,
+                          std::span<const uint16_t> kept, std::span<const uint16_t> map) {
+  const size_t n = parents.size();
+  const size_t m = kept.size();
+  if (map.size() != n) {
+    return StrCat("level ", l, ": the joint map has ", map.size(), " entries for ", n, " joints");
+  }
+  size_t next_slot = 0;  // kept is ascending: kept[next_slot] is the next kept joint
+  for (size_t j = 0; j < n; ++j) {
+    const uint16_t slot = map[j];
+    if (slot >= m) {
+      return StrCat("level ", l, ": joint ", j, " maps to slot ", slot, " (m = ", m, ")");
+    }
+    if (next_slot < m && kept[next_slot] == j) {
+      if (slot != next_slot) {
+        return StrCat("level ", l, ": kept joint ", j, " maps to slot ", slot,
+                      " instead of its own slot ", next_slot);
+      }
+      ++next_slot;
+    } else {
+      // j > 0: the root is kept. Parents precede children, so map[parent] is already
+      // known to be the slot of the parent's nearest kept ancestor.
+      const auto parent = static_cast<size_t>(parents[j]);
+      if (slot != map[parent]) {
+        return StrCat("level ", l, ": removed joint ", j, " maps to slot ", slot,
+                      " but its parent ", parent, " to slot ", map[parent],
+                      " (a removed joint is driven by its nearest kept ancestor)");
+      }
+    }
+  }
+  return {};
+}
+
+std::string CheckMatrices(size_t l, uint32_t frame_count, size_t m, bool rigid,
+                          std::span<const float> matrices) {
+  const uint64_t expected = uint64_t{frame_count} * m * kMatrixFloats;  // < 2^54
+  if (matrices.size() != expected) {
+    return StrCat("level ", l, " has ", matrices.size(), " matrix floats; T x m x 12 = ", expected);
+  }
+  // One branch-free pass (vectorises); locate the culprit only on failure.
+  bool all_finite = true;
+  for (const float value : matrices) all_finite &= IsFiniteBits(value);
+  if (!all_finite) {
+    for (size_t i = 0; i < matrices.size(); ++i) {
+      if (!IsFiniteBits(matrices[i])) {
+        const size_t matrix = i / kMatrixFloats;
+        return StrCat("level ", l, ": K'(frame ", matrix / m, ", slot ", matrix % m, ") element ",
+                      i % kMatrixFloats, " is not finite (", matrices[i], ")");
+      }
+    }
+  }
+  if (rigid) {
+    constexpr double kTolerance = 1e-3;
+    for (size_t matrix = 0; matrix < matrices.size() / kMatrixFloats; ++matrix) {
+      const float* k = matrices.data() + matrix * kMatrixFloats;
+      // Columns of A: (k[c], k[4 + c], k[8 + c]).
+      double det = 0;
+      bool orthonormal = true;
+      for (int a = 0; a < 3; ++a) {
+        for (int b = a; b < 3; ++b) {
+          const double dot =
+              double{k[a]} * k[b] + double{k[4 + a]} * k[4 + b] + double{k[8 + a]} * k[8 + b];
+          orthonormal &= std::abs(dot - (a == b ? 1.0 : 0.0)) <= kTolerance;
+        }
+      }
+      det = double{k[0]} * (double{k[5]} * k[10] - double{k[6]} * k[9]) -
+            double{k[1]} * (double{k[4]} * k[10] - double{k[6]} * k[8]) +
+            double{k[2]} * (double{k[4]} * k[9] - double{k[5]} * k[8]);
+      if (!orthonormal || !(det > 0)) {
+        return StrCat("level ", l, ": K'(frame ", matrix / m, ", slot ", matrix % m,
+                      ") is not a rotation plus translation, but the level set is flagged "
+                      "rigid");
+      }
+    }
+  }
+  return {};
+}
+
+std::string CheckLevelSet(const LevelSetSource& source, bool allow_unknown_flags) {
+  if (!allow_unknown_flags && (source.flags & ~kKnownLevelSetFlags) != 0) {
+    return StrCat("unknown flag bits ", source.flags & ~kKnownLevelSetFlags);
+  }
+  if (source.frame_count == 0) return "the level set has no frame";
+  if (!(std::isfinite(source.fps) && source.fps > 0)) {
+    return StrCat("fps is ", source.fps, " (finite and > 0 expected)");
+  }
+  std::string problem = CheckName("the variant name", source.variant_name, /*allow_empty=*/true);
+  if (!problem.empty()) return problem;
+  problem = CheckSkeleton(source);
+  if (!problem.empty()) return problem;
+  if (source.levels.empty()) return "the level set has no level";
+  if (source.levels.size() > kMaxLevelCount) {
+    return StrCat("the level set has ", source.levels.size(), " levels (at most ", kMaxLevelCount,
+                  ")");
+  }
+  const bool rigid = (source.flags & kLevelSetFlagRigid) != 0;
+  for (size_t l = 0; l < source.levels.size(); ++l) {
+    const LevelSource& level = source.levels[l];
+    problem = CheckKeptJoints(l, source.parents.size(), level.kept_joints);
+    if (problem.empty()) {
+      problem = CheckJointMap(l, source.parents, level.kept_joints, level.joint_map);
+    }
+    if (problem.empty()) problem = CheckFigures(l, level.figures);
+    if (problem.empty()) {
+      problem =
+          CheckMatrices(l, source.frame_count, level.kept_joints.size(), rigid, level.matrices);
+    }
+    if (!problem.empty()) return problem;
+  }
+  return {};
+}
+
+// ---------------------------------------------------------------------------------
+// Writing.
+
+struct PlannedSection {
+  uint32_t kind;
+  uint32_t level;
+  uint64_t offset;
+  uint64_t size;
+};
+
+struct Layout {
+  std::vector<PlannedSection> sections;
+  uint64_t trailer_offset = 0;
+  uint64_t file_size = 0;
+};
+
+uint64_t JointNamesBytes(const LevelSetSource& source) {
+  uint64_t bytes = 0;
+  for (std::string_view name : source.joint_names) bytes += 2 + uint64_t{name.size()};
+  return bytes;
+}
+
+Layout PlanLayout(const LevelSetSource& source, const WriterOptions& options) {
+  const uint64_t n = source.parents.size();
+  const uint64_t frame_count = source.frame_count;
+  Layout layout;
+  auto add = [&](SectionKind kind, uint32_t level, uint64_t size) {
+    layout.sections.push_back({static_cast<uint32_t>(kind), level, 0, size});
+  };
+  add(SectionKind::kVariantName, kNoLevel, source.variant_name.size());
+  add(SectionKind::kJointNames, kNoLevel, JointNamesBytes(source));
+  add(SectionKind::kJointParents, kNoLevel, 4 * n);
+  add(SectionKind::kLevelTable, kNoLevel,
+      uint64_t{options.level_record_size} * source.levels.size());
+  for (size_t l = 0; l < source.levels.size(); ++l) {
+    const uint64_t m = source.levels[l].kept_joints.size();
+    const auto level = static_cast<uint32_t>(l);
+    add(SectionKind::kKeptJoints, level, 2 * m);
+    add(SectionKind::kJointMap, level, 2 * n);
+    add(SectionKind::kMatrices, level, frame_count * m * kMatrixFloats * sizeof(float));
+  }
+  for (const ExtraSection& extra : options.extra_sections) {
+    layout.sections.push_back({extra.kind, extra.level, 0, extra.bytes.size()});
+  }
+  uint64_t cursor = AlignUp(uint64_t{options.header_size} +
+                            uint64_t{kDirectoryEntrySize} * layout.sections.size());
+  for (PlannedSection& section : layout.sections) {
+    section.offset = cursor;
+    cursor = AlignUp(cursor + section.size);
+  }
+  layout.trailer_offset = cursor;
+  layout.file_size = cursor + kTrailerSize;
+  return layout;
+}
+
+// Writes the planned file into out[0, layout.file_size), which the caller has sized.
+void WriteLevelSet(const LevelSetSource& source, const WriterOptions& options, const Layout& layout,
+                   std::byte* out) {
+  std::fill_n(out, layout.file_size, std::byte{0});  // padding and reserved fields are 0
+
+  // Header.
+  std::memcpy(out + internal::kOffsetMagic, internal::kMagic, sizeof internal::kMagic);
+  Store<uint16_t>(out + internal::kOffsetMajorVersion, options.major_version);
+  Store<uint16_t>(out + internal::kOffsetMinorVersion, options.minor_version);
+  Store<uint32_t>(out + internal::kOffsetHeaderSize, options.header_size);
+  Store<uint64_t>(out + internal::kOffsetFileSize, layout.file_size);
+  Store<uint32_t>(out + internal::kOffsetFlags, source.flags | options.extra_flags);
+  Store<uint32_t>(out + internal::kOffsetAlgorithmVersion, source.algorithm_version);
+  Store<uint32_t>(out + internal::kOffsetJointCount, static_cast<uint32_t>(source.parents.size()));
+  Store<uint32_t>(out + internal::kOffsetLevelCount, static_cast<uint32_t>(source.levels.size()));
+  Store<uint32_t>(out + internal::kOffsetFrameCount, source.frame_count);
+  Store<uint32_t>(out + internal::kOffsetSectionCount,
+                  static_cast<uint32_t>(layout.sections.size()));
+  Store<double>(out + internal::kOffsetFps, source.fps);
+  Store<uint64_t>(out + internal::kOffsetSettingsHash, source.settings_hash);
+  std::memcpy(out + internal::kOffsetSourceHash, source.source_hash.data(),
+              source.source_hash.size());
+  Store<uint32_t>(out + internal::kOffsetLevelRecordSize, options.level_record_size);
+  std::fill(out + kHeaderSize, out + options.header_size, std::byte{options.extension_fill});
+
+  // Directory.
+  for (size_t i = 0; i < layout.sections.size(); ++i) {
+    std::byte* entry = out + options.header_size + i * kDirectoryEntrySize;
+    Store<uint32_t>(entry + 0, layout.sections[i].kind);
+    Store<uint32_t>(entry + 4, layout.sections[i].level);
+    Store<uint64_t>(entry + 8, layout.sections[i].offset);
+    Store<uint64_t>(entry + 16, layout.sections[i].size);
+  }
+
+  // Sections, in directory order.
+  const PlannedSection* section = layout.sections.data();
+  auto write_bytes = [&](const void* bytes, size_t size) {
+    if (size != 0) std::memcpy(out + section->offset, bytes, size);
+    ++section;
+  };
+  write_bytes(source.variant_name.data(), source.variant_name.size());
+  {
+    std::byte* p = out + section->offset;
+    for (std::string_view name : source.joint_names) {
+      Store<uint16_t>(p, static_cast<uint16_t>(name.size()));
+      if (!name.empty()) std::memcpy(p + 2, name.data(), name.size());
+      p += 2 + name.size();
+    }
+    ++section;
+  }
+  write_bytes(source.parents.data(), source.parents.size_bytes());
+  {
+    std::byte* record = out + section->offset;
+    for (const LevelSource& level : source.levels) {
+      Store<uint32_t>(record + internal::kRecordOffsetKeptCount,
+                      static_cast<uint32_t>(level.kept_joints.size()));
+      const float figures[5] = {level.figures.max_vertex_error_pct,
+                                level.figures.mean_vertex_error_pct,
+                                level.figures.mean_normal_error_deg, level.figures.mean_E,
+                                level.figures.max_px_for_1px_error};
+      std::memcpy(record + internal::kRecordOffsetFigures, figures, sizeof figures);
+      std::fill(record + kLevelRecordSize, record + options.level_record_size,
+                std::byte{options.extension_fill});
+      record += options.level_record_size;
+    }
+    ++section;
+  }
+  for (const LevelSource& level : source.levels) {
+    write_bytes(level.kept_joints.data(), level.kept_joints.size_bytes());
+    write_bytes(level.joint_map.data(), level.joint_map.size_bytes());
+    write_bytes(level.matrices.data(), level.matrices.size_bytes());
+  }
+  for (const ExtraSection& extra : options.extra_sections) {
+    write_bytes(extra.bytes.data(), extra.bytes.size());
+  }
+
+  // Trailer.
+  std::byte* trailer = out + layout.trailer_offset;
+  std::memcpy(trailer, internal::kTrailerMagic, sizeof internal::kTrailerMagic);
+  const uint64_t checksum = Xxh64(std::span<const std::byte>(out, layout.file_size - 8));
+  Store<uint64_t>(trailer + 8, checksum);
+}
+
+StatusOr<std::string> EncodeSource(const LevelSetSource& source, const WriterOptions& options) {
+  const Layout layout = PlanLayout(source, options);
+  std::string out;
+  if (layout.file_size > out.max_size()) {
+    return InvalidArgument(StrCat("the level set needs ", layout.file_size, " bytes"));
+  }
+  out.resize(layout.file_size);
+  WriteLevelSet(source, options, layout, reinterpret_cast<std::byte*>(out.data()));
+  return out;
+}
+
+}  // namespace
+
+// -----------------------------------------------------------------------------------
+// Decoding.
+
+// Befriended by the views; checks a buffer and fills them in.
+class LevelSetDecoder {
+ public:
+  static StatusOr<LevelSetView> Decode(std::span<const std::byte> bytes,
+                                       const DecodeOptions& options);
+};
+
+StatusOr<LevelSetView> LevelSetDecoder::Decode(std::span<const std::byte> bytes,
+                                               const DecodeOptions& options) {
+  const std::byte* const data = bytes.data();
+  const uint64_t size = bytes.size();
+  auto malformed = [](std::string message) { return DataLoss(std::move(message)); };
+
+  if (!IsLevelFormatAligned(data)) {
+    return InvalidArgument(
+        StrCat("the level set buffer starts at an address that is not a multiple of ",
+               kLevelFormatAlignment, " bytes; decode an AlignedBytes::CopyOf it"));
+  }
+  if (size >= sizeof internal::kMagic &&
+      std::memcmp(data, internal::kMagic, sizeof internal::kMagic) != 0) {
+    return InvalidArgument("not a Motion LoD level set (bad magic)");
+  }
+  if (size < internal::kOffsetHeaderSize) {
+    return malformed(StrCat("truncated: ", size, " bytes cannot hold the header"));
+  }
+  const auto major = Load<uint16_t>(data + internal::kOffsetMajorVersion);
+  const auto minor = Load<uint16_t>(data + internal::kOffsetMinorVersion);
+  if (major != kLevelFormatMajorVersion) {
+    return Unsupported(StrCat("level format version ", major, ".", minor,
+                              " is not supported (this build reads ", kLevelFormatMajorVersion,
+                              ".x)"));
+  }
+  // A file of a later minor version may extend the header and the level records,
+  // set flag bits and fill reserved fields this build does not know, and append
+  // sections; one of this minor version or an earlier one may not.
+  const bool from_later_minor = minor > kLevelFormatMinorVersion;
+  if (size < kHeaderSize + kTrailerSize) {
+    return malformed(StrCat("truncated: ", size, " bytes cannot hold header and trailer"));
+  }
+
+  // Header.
+  const auto header_size = Load<uint32_t>(data + internal::kOffsetHeaderSize);
+  const auto file_size = Load<uint64_t>(data + internal::kOffsetFileSize);
+  const auto flags = Load<uint32_t>(data + internal::kOffsetFlags);
+  const auto joint_count = Load<uint32_t>(data + internal::kOffsetJointCount);
+  const auto level_count = Load<uint32_t>(data + internal::kOffsetLevelCount);
+  const auto frame_count = Load<uint32_t>(data + internal::kOffsetFrameCount);
+  const auto section_count = Load<uint32_t>(data + internal::kOffsetSectionCount);
+  const auto level_record_size = Load<uint32_t>(data + internal::kOffsetLevelRecordSize);
+  if (file_size != size) {
+    return malformed(StrCat("the header says the file is ", file_size, " bytes but there are ",
+                            size, (file_size > size ? " (truncated)" : "")));
+  }
+  if (size % kAlignment != 0) {
+    return malformed(StrCat("the file size ", size, " is not a multiple of ", kAlignment));
+  }
+  const uint64_t trailer_offset = size - kTrailerSize;
+  if (std::memcmp(data + trailer_offset, internal::kTrailerMagic, sizeof internal::kTrailerMagic) !=
+      0) {
+    return malformed("the trailer magic is missing (truncated or corrupted)");
+  }
+  if (options.verify_checksum) {
+    const auto stored = Load<uint64_t>(data + size - 8);
+    const uint64_t computed = Xxh64(bytes.first(size - 8));
+    if (stored != computed) return malformed("checksum mismatch: the file is corrupted");
+  }
+  if (header_size < kHeaderSize || header_size % kAlignment != 0 ||
+      (!from_later_minor && header_size != kHeaderSize)) {
+    return malformed(
+        StrCat("header size ", header_size, " is invalid for version ", major, ".", minor));
+  }
+  if (header_size > trailer_offset) {
+    return malformed(StrCat("header size ", header_size, " runs past the end of the file"));
+  }
+  if (level_record_size < kLevelRecordSize || level_record_size % 4 != 0 ||
+      (!from_later_minor && level_record_size != kLevelRecordSize)) {
+    return malformed(StrCat("level record size ", level_record_size, " is invalid for version ",
+                            major, ".", minor));
+  }
+  if (!from_later_minor) {
+    if ((flags & ~kKnownLevelSetFlags) != 0) {
+      return malformed(StrCat("unknown flag bits ", flags & ~kKnownLevelSetFlags));
+    }
+    if (Load<uint32_t>(data + internal::kOffsetReserved0) != 0 ||
+        Load<uint64_t>(data + internal::kOffsetReserved1) != 0) {
+      return malformed("reserved header fields are not zero");
+    }
+  }
+  if (joint_count == 0 || joint_count > kMaxJointCount) {
+    return malformed(StrCat("joint count ", joint_count, " is out of [1, ", kMaxJointCount, "]"));
+  }
+  if (level_count == 0 || level_count > kMaxLevelCount) {
+    return malformed(StrCat("level count ", level_count, " is out of [1, ", kMaxLevelCount, "]"));
+  }
+  if (frame_count == 0) return malformed("the frame count is 0");
+
+  // Directory: the known sections in canonical order, then (later minor versions only)
+  // sections this build skips. Every section starts on the first 16-byte boundary
+  // after its predecessor, and every byte between is zero.
+  const uint64_t known_sections = kGlobalSectionCount + uint64_t{kSectionsPerLevel} * level_count;
+  if (section_count < known_sections || (!from_later_minor && section_count != known_sections)) {
+    return malformed(StrCat("section count ", section_count, " for ", level_count,
+                            " levels (expected ", known_sections, ")"));
+  }
+  const uint64_t directory_end = header_size + uint64_t{kDirectoryEntrySize} * section_count;
+  if (directory_end > trailer_offset) {
+    return malformed(StrCat("the directory of ", section_count, " sections runs past the end"));
+  }
+  struct Section {
+    uint64_t offset;
+    uint64_t size;
+  };
+  std::vector<Section> sections;  // the known ones; bounded by the file size above
+  sections.reserve(known_sections);
+  uint64_t cursor = AlignUp(directory_end);  // <= trailer_offset, a multiple of 16
+  if (!AllZero(bytes.subspan(directory_end, cursor - directory_end))) {
+    return malformed("non-zero padding after the directory");
+  }
+  for (uint64_t i = 0; i < section_count; ++i) {
+    const std::byte* entry = data + header_size + i * kDirectoryEntrySize;
+    const auto kind = Load<uint32_t>(entry + 0);
+    const auto level = Load<uint32_t>(entry + 4);
+    const auto offset = Load<uint64_t>(entry + 8);
+    const auto section_size = Load<uint64_t>(entry + 16);
+    if (offset != cursor) {
+      return malformed(StrCat("section ", i, " starts at ", offset, " instead of ", cursor));
+    }
+    if (section_size > trailer_offset - offset) {
+      return malformed(StrCat("section ", i, " of ", section_size, " bytes at ", offset,
+                              " runs past the end of the file"));
+    }
+    const uint64_t end = offset + section_size;
+    cursor = AlignUp(end);  // <= trailer_offset, which is a multiple of 16
+    if (!AllZero(bytes.subspan(end, cursor - end))) {
+      return malformed(StrCat("non-zero padding after section ", i));
+    }
+    if (i < known_sections) {
+      SectionKind expected_kind;
+      uint32_t expected_level = kNoLevel;
+      if (i < kGlobalSectionCount) {
+        expected_kind = static_cast<SectionKind>(i + 1);
+      } else {
+        const uint64_t k = i - kGlobalSectionCount;
+        expected_kind = static_cast<SectionKind>(static_cast<uint32_t>(SectionKind::kKeptJoints) +
+                                                 k % kSectionsPerLevel);
+        expected_level = static_cast<uint32_t>(k / kSectionsPerLevel);
+      }
+      if (kind != static_cast<uint32_t>(expected_kind) || level != expected_level) {
+        return malformed(
+            StrCat("section ", i, " is of kind ", kind, " for level ",
+                   static_cast<int64_t>(level == kNoLevel ? -1 : level), "; expected kind ",
+                   static_cast<uint32_t>(expected_kind), " for level ",
+                   static_cast<int64_t>(expected_level == kNoLevel ? -1 : expected_level)));
+      }
+      sections.push_back({offset, section_size});
+    }
+  }
+  if (cursor != trailer_offset) {
+    return malformed(StrCat(trailer_offset - cursor, " unclaimed bytes before the trailer"));
+  }
+
+  // Section contents. Sizes are checked before any array is read or allocated.
+  const uint64_t n = joint_count;
+  const Section& variant = sections[0];
+  const Section& names = sections[1];
+  const Section& parents = sections[2];
+  const Section& table = sections[3];
+  if (variant.size > kMaxNameBytes) {
+    return malformed(
+        StrCat("the variant name is ", variant.size, " bytes long (at most ", kMaxNameBytes, ")"));
+  }
+  if (parents.size != 4 * n) {
+    return malformed(StrCat("the parents section is ", parents.size, " bytes for ", n, " joints"));
+  }
+  if (names.size < 2 * n) {
+    return malformed(
+        StrCat("the joint names section is ", names.size, " bytes for ", n, " joints"));
+  }
+  if (table.size != uint64_t{level_record_size} * level_count) {  // < 2^48
+    return malformed(StrCat("the level table is ", table.size, " bytes for ", level_count,
+                            " records of ", level_record_size));
+  }
+
+  LevelSetSource source;
+  source.flags = flags;
+  source.algorithm_version = Load<uint32_t>(data + internal::kOffsetAlgorithmVersion);
+  source.frame_count = frame_count;
+  source.fps = Load<double>(data + internal::kOffsetFps);
+  std::memcpy(source.source_hash.data(), data + internal::kOffsetSourceHash,
+              source.source_hash.size());
+  source.settings_hash = Load<uint64_t>(data + internal::kOffsetSettingsHash);
+  source.variant_name = {reinterpret_cast<const char*>(data + variant.offset), variant.size};
+  source.joint_names.reserve(n);
+  {
+    uint64_t at = 0;
+    const std::byte* p = data + names.offset;
+    for (uint64_t j = 0; j < n; ++j) {
+      if (names.size - at < 2) {
+        return malformed(StrCat("the joint names section ends inside the length of joint ", j));
+      }
+      const auto length = Load<uint16_t>(p + at);
+      at += 2;
+      if (names.size - at < length) {
+        return malformed(StrCat("the joint names section ends inside the name of joint ", j));
+      }
+      source.joint_names.emplace_back(reinterpret_cast<const char*>(p + at), length);
+      at += length;
+    }
+    if (at != names.size) {
+      return malformed(
+          StrCat("the joint names section has ", names.size - at, " bytes past the last name"));
+    }
+  }
+  // In place: the offset is a multiple of 16 and so is the buffer's address.
+  source.parents = {reinterpret_cast<const int32_t*>(data + parents.offset), n};
+
+  source.levels.resize(level_count);
+  for (uint32_t l = 0; l < level_count; ++l) {
+    const std::byte* record = data + table.offset + uint64_t{l} * level_record_size;
+    const auto m = Load<uint32_t>(record + internal::kRecordOffsetKeptCount);
+    if (m == 0 || m > n) {
+      return malformed(StrCat("level ", l, " keeps ", m, " joints of ", n));
+    }
+    if (!from_later_minor && (Load<uint32_t>(record + internal::kRecordOffsetReserved) != 0 ||
+                              Load<uint32_t>(record + internal::kRecordOffsetReserved + 4) != 0)) {
+      return malformed(StrCat("level ", l, ": reserved record fields are not zero"));
+    }
+    float figures[5];
+    std::memcpy(figures, record + internal::kRecordOffsetFigures, sizeof figures);
+    const Section& kept = sections[kGlobalSectionCount + kSectionsPerLevel * l];
+    const Section& map = sections[kGlobalSectionCount + kSectionsPerLevel * l + 1];
+    const Section& matrices = sections[kGlobalSectionCount + kSectionsPerLevel * l + 2];
+    const uint64_t matrix_bytes = uint64_t{frame_count} * m * kMatrixFloats * sizeof(float);
+    if (kept.size != 2 * uint64_t{m} || map.size != 2 * n || matrices.size != matrix_bytes) {
+      return malformed(StrCat("level ", l, ": sections of ", kept.size, ", ", map.size, " and ",
+                              matrices.size, " bytes; expected ", 2 * uint64_t{m}, ", ", 2 * n,
+                              " and ", matrix_bytes, " for m = ", m, ", T = ", frame_count));
+    }
+    LevelSource& level = source.levels[l];
+    level.kept_joints = {reinterpret_cast<const uint16_t*>(data + kept.offset), m};
+    level.joint_map = {reinterpret_cast<const uint16_t*>(data + map.offset), n};
+    level.matrices = {reinterpret_cast<const float*>(data + matrices.offset),
+                      uint64_t{frame_count} * m * kMatrixFloats};
+    level.figures = {figures[0], figures[1], figures[2], figures[3], figures[4]};
+  }
+
+  std::string problem = CheckLevelSet(source, /*allow_unknown_flags=*/from_later_minor);
+  if (!problem.empty()) return malformed(std::move(problem));
+
+  LevelSetView view;
+  view.bytes_ = bytes;
+  view.minor_version_ = minor;
+  view.flags_ = flags;
+  view.algorithm_version_ = source.algorithm_version;
+  view.frame_count_ = frame_count;
+  view.fps_ = source.fps;
+  view.source_hash_ = source.source_hash;
+  view.settings_hash_ = source.settings_hash;
+  view.variant_name_ = source.variant_name;
+  view.joint_names_ = std::move(source.joint_names);
+  view.parents_ = source.parents;
+  view.levels_.resize(level_count);
+  for (uint32_t l = 0; l < level_count; ++l) {
+    LevelView& level = view.levels_[l];
+    level.frame_count_ = frame_count;
+    level.kept_joints_ = source.levels[l].kept_joints;
+    level.joint_map_ = source.levels[l].joint_map;
+    level.figures_ = source.levels[l].figures;
+    level.matrices_ = source.levels[l].matrices;
+  }
+  return view;
+}
+
+// -----------------------------------------------------------------------------------
+// Public entry points.
+
+Status ValidateLevelSet(const LevelSetData& data) {
+  std::string problem = CheckLevelSet(SourceOf(data), /*allow_unknown_flags=*/false);
+  if (!problem.empty()) return InvalidArgument(std::move(problem));
+  return Status::Ok();
+}
+
+StatusOr<std::vector<uint16_t>> ComputeJointMap(std::span<const int32_t> parents,
+                                                std::span<const uint16_t> kept_joints) {
+  const size_t n = parents.size();
+  if (n == 0 || n > kMaxJointCount) return InvalidArgument(StrCat("invalid joint count ", n));
+  if (parents[0] != -1) return InvalidArgument("joint 0 must be the root (parent -1)");
+  for (size_t j = 1; j < n; ++j) {
+    if (parents[j] < 0 || static_cast<size_t>(parents[j]) >= j) {
+      return InvalidArgument(
+          StrCat("joint ", j, " has parent ", parents[j], "; parents must be topological"));
+    }
+  }
+  std::string problem = CheckKeptJoints(0, n, kept_joints);
+  if (!problem.empty()) return InvalidArgument(std::move(problem));
+  std::vector<uint16_t> map(n);
+  size_t next_slot = 0;
+  for (size_t j = 0; j < n; ++j) {
+    if (next_slot < kept_joints.size() && kept_joints[next_slot] == j) {
+      map[j] = static_cast<uint16_t>(next_slot++);
+    } else {
+      map[j] = map[static_cast<size_t>(parents[j])];
+    }
+  }
+  return map;
+}
+
+size_t EncodedLevelSetSize(const LevelSetData& data) {
+  return static_cast<size_t>(PlanLayout(SourceOf(data), WriterOptions{}).file_size);
+}
+
+StatusOr<std::string> EncodeLevelSet(const LevelSetData& data) {
+  return internal::EncodeLevelSetWithOptions(data, WriterOptions{});
+}
+
+StatusOr<size_t> EncodeLevelSetInto(const LevelSetData& data, std::span<std::byte> out) {
+  Status status = ValidateLevelSet(data);
+  if (!status.ok()) return status;
+  const LevelSetSource source = SourceOf(data);
+  const WriterOptions options;
+  const Layout layout = PlanLayout(source, options);
+  if (out.size() < layout.file_size) {
+    return InvalidArgument(
+        StrCat("the output holds ", out.size(), " bytes; the level set needs ", layout.file_size));
+  }
+  WriteLevelSet(source, options, layout, out.data());
+  return static_cast<size_t>(layout.file_size);
+}
+
+StatusOr<LevelSetView> DecodeLevelSet(std::span<const std::byte> bytes,
+                                      const DecodeOptions& options) {
+  return LevelSetDecoder::Decode(bytes, options);
+}
+
+StatusOr<LevelSetView> DecodeLevelSet(std::string_view bytes, const DecodeOptions& options) {
+  return LevelSetDecoder::Decode(std::as_bytes(std::span(bytes.data(), bytes.size())), options);
+}
+
+StatusOr<std::string> ExtractLevel(const LevelSetView& view, uint32_t l) {
+  if (l >= view.level_count()) {
+    return NotFound(StrCat("level ", l, " of a level set of ", view.level_count()));
+  }
+  // The view was validated when decoded: write without checking again.
+  LevelSetSource source = HeaderSourceOf(view);
+  source.levels.push_back(SourceOf(view.level(l)));
+  return EncodeSource(source, WriterOptions{});
+}
+
+LevelSetData ToLevelSetData(const LevelSetView& view) {
+  LevelSetData data;
+  data.variant_name = std::string(view.variant_name());
+  data.flags = view.flags() & kKnownLevelSetFlags;
+  data.algorithm_version = view.algorithm_version();
+  data.frame_count = view.frame_count();
+  data.fps = view.fps();
+  data.source_hash = view.source_hash();
+  data.settings_hash = view.settings_hash();
+  data.joint_names.assign(view.joint_names().begin(), view.joint_names().end());
+  data.parents.assign(view.parents().begin(), view.parents().end());
+  data.levels.reserve(view.level_count());
+  for (const LevelView& level : view.levels()) {
+    data.levels.push_back({{level.kept_joints().begin(), level.kept_joints().end()},
+                           {level.joint_map().begin(), level.joint_map().end()},
+                           level.figures(),
+                           {level.matrices().begin(), level.matrices().end()}});
+  }
+  return data;
+}
+
+namespace internal {
+
+StatusOr<std::string> EncodeLevelSetWithOptions(const LevelSetData& data,
+                                                const WriterOptions& options) {
+  Status status = ValidateLevelSet(data);
+  if (!status.ok()) return status;
+  return EncodeSource(SourceOf(data), options);
+}
+
+}  // namespace internal
+
+}  // namespace motionlod::proto

@@ -1,0 +1,236 @@
+// The Motion LoD level-set format: the bake tool writes a whole level set, the server
+// streams single levels (the same format with one level), the thin client decodes
+// without copying the frame data. The byte layout, versioning and validation rules are
+// in docs/level-format.md; this header is the API.
+//
+// Letters (as in core/types.h): j joint of the original skeleton (n of them), l level
+// (L), t frame (T), s slot of a kept joint within a level (m kept joints).
+// K'_s(t): the skinning matrix of kept joint s at frame t. It maps a bind-pose,
+// model-space point to posed model space: p' = A p + b, stored as the top three rows of
+// the 4x4 affine [A | b], row-major, float32:
+//   { A00 A01 A02 b0  A10 A11 A12 b1  A20 A21 A22 b2 }.
+//
+// Writing: fill a LevelSetData, EncodeLevelSet (validates, then writes).
+// Reading: DecodeLevelSet checks everything (checksum, structure, semantics) and returns
+// a LevelSetView whose spans point into the caller's buffer; the buffer must start on a
+// 16-byte boundary (AlignedBytes::CopyOf otherwise) and outlive the view.
+#pragma once
+
+#include <array>
+#include <bit>
+#include <cassert>
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "base/status.h"
+#include "proto/aligned_bytes.h"
+
+namespace motionlod::proto {
+
+static_assert(std::endian::native == std::endian::little,
+              "the level format is viewed in place: proto needs a little-endian host");
+static_assert(std::numeric_limits<float>::is_iec559 && sizeof(float) == 4,
+              "the level format stores IEEE-754 binary32 floats");
+
+using ::motionlod::Status;
+using ::motionlod::StatusOr;
+
+// Format version written by this build. Readers reject another major version and
+// accept any minor version of their major (see docs/level-format.md, "Versioning").
+inline constexpr uint16_t kLevelFormatMajorVersion = 1;
+inline constexpr uint16_t kLevelFormatMinorVersion = 0;
+
+// LevelSetData::flags bits.
+// Every K'_s(t) is a rotation plus a translation (A orthonormal, det A = +1, checked
+// to 1e-3): a client may transform normals by A instead of its inverse transpose.
+inline constexpr uint32_t kLevelSetFlagRigid = 1u << 0;
+inline constexpr uint32_t kKnownLevelSetFlags = kLevelSetFlagRigid;
+
+inline constexpr uint32_t kMaxJointCount = 65535;  // joint indices and slots are u16
+inline constexpr uint32_t kMaxLevelCount = 65535;
+inline constexpr size_t kMaxNameBytes = 65535;  // joint and variant names, UTF-8 bytes
+inline constexpr size_t kMatrixFloats = 12;     // one 3x4 row-major K'_s(t)
+
+// Quality figures of one level, as the bake measured them.
+struct LevelFigures {
+  float max_vertex_error_pct = 0;   // max over frames and vertices, % of character height
+  float mean_vertex_error_pct = 0;  // mean over frames and vertices, % of character height
+  float mean_normal_error_deg = 0;  // mean angle between reference and level normals, degrees
+  float mean_E = 0;                 // mean over frames of the paper's objective E (core's units)
+  // The largest on-screen character height, in pixels, at which this level's max
+  // vertex error stays within one pixel (100 / max_vertex_error_pct); +inf when the
+  // level is exact.
+  float max_px_for_1px_error = std::numeric_limits<float>::infinity();
+
+  bool operator==(const LevelFigures&) const = default;
+};
+
+// One level: m kept joints.
+struct LevelData {
+  // m original joint indices, strictly ascending; contains joint 0 (the root).
+  std::vector<uint16_t> kept_joints;
+  // n; joint_map[j] is the slot s (index into kept_joints) of the kept joint that drives
+  // original joint j: its own slot when j is kept, else its nearest kept ancestor's
+  // (ComputeJointMap builds it).
+  std::vector<uint16_t> joint_map;
+  LevelFigures figures;
+  // T x m x 12: matrices[(t * m + s) * 12 + k], K'_s(t) as described above; finite.
+  std::vector<float> matrices;
+
+  bool operator==(const LevelData&) const = default;
+};
+
+// Editable plain data of a level set (what the bake tool fills in).
+struct LevelSetData {
+  std::string variant_name;  // UTF-8, no NUL, may be empty
+  uint32_t flags = 0;        // kLevelSetFlag* bits
+  uint32_t algorithm_version = 0;
+  uint32_t frame_count = 0;  // T >= 1
+  double fps = 30.0;         // finite, > 0
+  // SHA-256 of the bake inputs and the hash of the bake settings: opaque to proto,
+  // carried so that a stored result can be checked against a cache key.
+  std::array<uint8_t, 32> source_hash{};
+  uint64_t settings_hash = 0;
+  // n joints in topological order: parents[0] == -1 (the single root) and
+  // 0 <= parents[j] < j for j > 0. Names: unique, non-empty UTF-8 without NUL.
+  std::vector<std::string> joint_names;
+  std::vector<int32_t> parents;
+  std::vector<LevelData> levels;  // L >= 1, in the writer's order
+
+  bool operator==(const LevelSetData&) const = default;
+};
+
+// Checks every field combination of `data` against the rules of
+// docs/level-format.md ("Validation"); the message names the first offending level,
+// joint, slot or frame. kInvalidArgument when invalid.
+Status ValidateLevelSet(const LevelSetData& data);
+
+// The joint map of a level: for each of the n joints, the slot of its nearest kept
+// ancestor (itself when kept). kInvalidArgument when the parents are not topological
+// or `kept_joints` is not strictly ascending, in range and containing the root.
+StatusOr<std::vector<uint16_t>> ComputeJointMap(std::span<const int32_t> parents,
+                                                std::span<const uint16_t> kept_joints);
+
+// The exact number of bytes EncodeLevelSet writes for `data` when it is valid (a
+// worst-case bound to size a caller-owned buffer). Does not validate.
+size_t EncodedLevelSetSize(const LevelSetData& data);
+
+// Validates `data`, then writes it. The string holds the whole file; decode it in place
+// only where its storage is 16-byte aligned (AlignedBytes::CopyOf otherwise).
+StatusOr<std::string> EncodeLevelSet(const LevelSetData& data);
+
+// Validates `data`, then writes it into the first EncodedLevelSetSize(data) bytes of
+// `out` (any alignment) and returns that size. kInvalidArgument when `out` is smaller;
+// nothing is written on failure.
+StatusOr<size_t> EncodeLevelSetInto(const LevelSetData& data, std::span<std::byte> out);
+
+// One level of a decoded level set; spans into the decoded buffer.
+class LevelView {
+ public:
+  uint32_t kept_count() const { return static_cast<uint32_t>(kept_joints_.size()); }  // m
+  uint32_t frame_count() const { return frame_count_; }                               // T
+  std::span<const uint16_t> kept_joints() const { return kept_joints_; }  // m, ascending
+  std::span<const uint16_t> joint_map() const { return joint_map_; }      // n, slots < m
+  const LevelFigures& figures() const { return figures_; }
+  // T x m x 12 floats, frame-major.
+  std::span<const float> matrices() const { return matrices_; }
+  // The m x 12 floats of frame t.
+  std::span<const float> frame(uint32_t t) const {
+    assert(t < frame_count_);
+    return matrices_.subspan(size_t{t} * kept_joints_.size() * kMatrixFloats,
+                             kept_joints_.size() * kMatrixFloats);
+  }
+  // K'_s(t): 12 floats, 3x4 row-major.
+  const float* matrix(uint32_t t, uint32_t s) const {
+    assert(t < frame_count_ && s < kept_joints_.size());
+    return matrices_.data() + (size_t{t} * kept_joints_.size() + s) * kMatrixFloats;
+  }
+
+ private:
+  friend class LevelSetDecoder;
+  uint32_t frame_count_ = 0;
+  std::span<const uint16_t> kept_joints_;
+  std::span<const uint16_t> joint_map_;
+  LevelFigures figures_;
+  std::span<const float> matrices_;
+};
+
+// A decoded, fully validated level set. Holds O(n + L) bookkeeping of its own; every
+// array and string points into the decoded buffer, which must outlive the view.
+class LevelSetView {
+ public:
+  uint16_t minor_version() const { return minor_version_; }  // as written
+  // As written: a file of a later minor version may carry bits this build ignores.
+  uint32_t flags() const { return flags_; }
+  bool rigid() const { return (flags_ & kLevelSetFlagRigid) != 0; }
+  uint32_t algorithm_version() const { return algorithm_version_; }
+  uint32_t joint_count() const { return static_cast<uint32_t>(parents_.size()); }  // n
+  uint32_t level_count() const { return static_cast<uint32_t>(levels_.size()); }   // L
+  uint32_t frame_count() const { return frame_count_; }                            // T
+  double fps() const { return fps_; }
+  const std::array<uint8_t, 32>& source_hash() const { return source_hash_; }
+  uint64_t settings_hash() const { return settings_hash_; }
+  std::string_view variant_name() const { return variant_name_; }
+  std::span<const std::string_view> joint_names() const { return joint_names_; }
+  std::string_view joint_name(uint32_t j) const {
+    assert(j < joint_names_.size());
+    return joint_names_[j];
+  }
+  std::span<const int32_t> parents() const { return parents_; }
+  std::span<const LevelView> levels() const { return levels_; }
+  const LevelView& level(uint32_t l) const {
+    assert(l < levels_.size());
+    return levels_[l];
+  }
+  // The whole decoded file.
+  std::span<const std::byte> bytes() const { return bytes_; }
+
+ private:
+  friend class LevelSetDecoder;
+  std::span<const std::byte> bytes_;
+  uint16_t minor_version_ = 0;
+  uint32_t flags_ = 0;
+  uint32_t algorithm_version_ = 0;
+  uint32_t frame_count_ = 0;
+  double fps_ = 0;
+  std::array<uint8_t, 32> source_hash_{};
+  uint64_t settings_hash_ = 0;
+  std::string_view variant_name_;
+  std::vector<std::string_view> joint_names_;
+  std::span<const int32_t> parents_;
+  std::vector<LevelView> levels_;
+};
+
+struct DecodeOptions {
+  // Off only where the structure itself is under test (a fuzz target, which cannot
+  // forge checksums); every structural and semantic check still runs.
+  bool verify_checksum = true;
+};
+
+// Decodes and validates a level-set file in place. Never reads outside `bytes`, never
+// asserts on any content. Errors:
+//   kInvalidArgument  `bytes` does not start on a 16-byte boundary, or is not a level
+//                     set (magic mismatch);
+//   kUnsupported      another major version of the format;
+//   kDataLoss         truncated, corrupted (checksum) or malformed (any rule of
+//                     docs/level-format.md, "Validation"); the message says which.
+StatusOr<LevelSetView> DecodeLevelSet(std::span<const std::byte> bytes,
+                                      const DecodeOptions& options = {});
+StatusOr<LevelSetView> DecodeLevelSet(std::string_view bytes, const DecodeOptions& options = {});
+
+// Level l of `view` as a one-level file of the current version (what the server
+// streams): header, skeleton and hashes unchanged, level_count 1. Flags this build does
+// not know are dropped, and so are the unknown sections of a later minor version.
+// kNotFound when l >= view.level_count().
+StatusOr<std::string> ExtractLevel(const LevelSetView& view, uint32_t l);
+
+// A copy of `view` as editable data (flags this build does not know dropped), so that
+// EncodeLevelSet(ToLevelSetData(view)) reproduces a current-version file byte for byte.
+LevelSetData ToLevelSetData(const LevelSetView& view);
+
+}  // namespace motionlod::proto
