@@ -339,18 +339,20 @@ void PreparedMotion::Impl::SampledErrors(const MatrixXd& delta, LevelErrors& out
   const RawSkin& skin = character->skin();
   const std::vector<double>& areas = character->vertex_areas();
   double distance_sum = 0, angle_sum = 0;
+  std::vector<Affine34d> frame_delta(n);
   for (size_t q = 0; q < sample_frames.size(); ++q) {
     const int t = sample_frames[q];
+    for (int k = 0; k < n; ++k) frame_delta[k] = DeltaAt(delta, k, t);
     for (size_t v = 0; v < sample_vertices.size(); ++v) {
       const int i = sample_vertices[v];
       const Vec3d v0 = skin.positions[i].cast<double>();
       const Vec3d n0 = skin.normals[i].cast<double>();
-      Vec3d d = Vec3d::Zero(), dn = Vec3d::Zero();
+      Affine34d blended = Affine34d::Zero();
       for (uint32_t g = skin.influence_offsets[i]; g < skin.influence_offsets[i + 1]; ++g) {
-        const Affine34d dk = DeltaAt(delta, skin.influence_joints[g], t);
-        d += skin.influence_weights[g] * TransformPoint(dk, v0);
-        dn += skin.influence_weights[g] * TransformDirection(dk, n0);
+        blended.noalias() += skin.influence_weights[g] * frame_delta[skin.influence_joints[g]];
       }
+      const Vec3d d = TransformPoint(blended, v0);
+      const Vec3d dn = TransformDirection(blended, n0);
       const Vec3d& normal = sample_normals[q * sample_vertices.size() + v];
       const Vec3d reduced = normal + dn;
       distance_sum += areas[i] * d.norm();

@@ -76,8 +76,8 @@ struct SolveSettings {
   double regularization = 1e-7;  // relative Tikhonov weight, > 0
   // The sampled figures (mean vertex error, mean normal angle) use up to this many evenly
   // spaced frames and vertices; the maximum vertex error is exact over every frame.
-  int sample_frames = 32;
-  int sample_vertices = 4096;
+  int sample_frames = 8;
+  int sample_vertices = 1024;
 
   Status Validate() const;
   uint64_t Hash() const;  // feeds cache keys together with kAlgorithmVersion

@@ -205,32 +205,23 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
                     "solve");
   };
   if (request.levels.empty() && !request.all_levels) {
-    // The smallest useful skeleton: bisect on the optimised maximum vertex error, which
-    // grows as joints go (not strictly, so this finds a level that meets the bound with
-    // the level below it failing).
+    // The smallest useful skeleton: bisect the kept count over [minimum, n] on the
+    // optimised maximum vertex error (exact at n). The error grows as joints go, though
+    // not strictly, so this finds a count that meets the bound with the one below failing.
     const double bound = request.smallest_useful_error_pct;
-    int lo = minimum, hi = counts.back();
-    auto error_of = [&](int count) -> StatusOr<double> {
-      if (!solved.count(count)) {
-        if (Status status = SolveCounts(**prepared, *ranking, {count}, 1, solved, on_level_done, cancel);
+    int lo = minimum, hi = n;
+    while (lo < hi) {
+      const int mid = lo + (hi - lo) / 2;
+      if (!solved.count(mid)) {
+        if (Status status = SolveCounts(**prepared, *ranking, {mid}, 1, solved, on_level_done, cancel);
             !status.ok()) {
           return status;
         }
       }
-      return solved.at(count).optimized.max_vertex_error_pct;
-    };
-    auto hi_error = error_of(hi);
-    if (!hi_error.ok()) return hi_error.status();
-    if (*hi_error <= bound) {
-      while (lo < hi) {
-        const int mid = lo + (hi - lo) / 2;
-        auto mid_error = error_of(mid);
-        if (!mid_error.ok()) return mid_error.status();
-        if (*mid_error <= bound) {
-          hi = mid;
-        } else {
-          lo = mid + 1;
-        }
+      if (solved.at(mid).optimized.max_vertex_error_pct <= bound) {
+        hi = mid;
+      } else {
+        lo = mid + 1;
       }
     }
     counts.push_back(hi);
@@ -305,11 +296,10 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
   const double bake_seconds = SecondsSince(start);
 
   report_progress(0.98, "measure");
-  ReportInputs report_inputs{request, character, motion, *ranking, **prepared, counts, solved, curves};
-  report_inputs.bake_seconds = bake_seconds;
-  report_inputs.skinning_pass_seconds = SkinningPassSeconds(character, motion, threads);
-  report_inputs.threads = threads;
-  report_inputs.warnings = inputs->warnings;
+  const ReportInputs report_inputs{request,       character, motion, *ranking, **prepared,
+                                   counts,        solved,    curves,  bake_seconds,
+                                   SkinningPassSeconds(character, motion, threads),
+                                   threads,       inputs->warnings};
 
   BakeOutput output;
   output.level_set = std::move(*encoded);

@@ -12,8 +12,15 @@ namespace motionlod::tools {
 namespace fs = std::filesystem;
 namespace {
 
+// 'path', built piecewise: GCC 12 warns falsely (-Wrestrict) on "'" + string chains.
+std::string Quote(const fs::path& path) {
+  std::string quoted(1, '\'');
+  quoted.append(path.string()).push_back('\'');
+  return quoted;
+}
+
 Status Errno(const std::string& what, const fs::path& path) {
-  return Status(StatusCode::kInvalidArgument, what + " '" + path.string() + "': " + std::strerror(errno));
+  return Status(StatusCode::kInvalidArgument, what + " " + Quote(path) + ": " + std::strerror(errno));
 }
 
 Status WriteAndSync(const fs::path& path, const std::string& contents) {
@@ -50,7 +57,10 @@ void SyncDirectory(const fs::path& dir) {
 fs::path Sibling(const fs::path& target, const char* tag) {
   fs::path parent = target.parent_path();
   if (parent.empty()) parent = ".";
-  return parent / ("." + target.filename().string() + "." + tag + "." + std::to_string(::getpid()));
+  std::string name(".");
+  name.append(target.filename().string()).append(".").append(tag).append(".");
+  name.append(std::to_string(::getpid()));
+  return parent / name;
 }
 
 }  // namespace
@@ -74,15 +84,15 @@ Status WriteFileAtomically(const fs::path& path, const std::string& contents) {
 
 Status WriteDirectoryAtomically(const fs::path& dir,
                                 const std::vector<std::pair<std::string, std::string>>& files) {
-  if (dir.filename().empty()) return InvalidArgument("the output directory needs a name: '" + dir.string() + "'");
+  if (dir.filename().empty()) return InvalidArgument("the output directory needs a name: " + Quote(dir));
   std::error_code error;
   if (fs::exists(dir, error) && !fs::is_directory(dir, error)) {
-    return InvalidArgument("'" + dir.string() + "' exists and is not a directory");
+    return InvalidArgument(Quote(dir) + " exists and is not a directory");
   }
   const fs::path temp = Sibling(dir, "partial");
   fs::remove_all(temp, error);
   if (!fs::create_directories(temp, error)) {
-    return InvalidArgument("cannot create '" + temp.string() + "': " + error.message());
+    return InvalidArgument("cannot create " + Quote(temp) + ": " + error.message());
   }
   auto fail = [&](Status status) {
     std::error_code ignored;
@@ -91,7 +101,7 @@ Status WriteDirectoryAtomically(const fs::path& dir,
   };
   for (const auto& [name, contents] : files) {
     if (name.empty() || name.find('/') != std::string::npos || name == "." || name == "..") {
-      return fail(InvalidArgument("bad output file name '" + name + "'"));
+      return fail(InvalidArgument("bad output file name " + Quote(name)));
     }
     if (Status status = WriteAndSync(temp / name, contents); !status.ok()) return fail(status);
   }

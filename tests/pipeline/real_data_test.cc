@@ -1,0 +1,210 @@
+// The method's guarantees on real characters and motions from ../shared/data.
+#include <filesystem>
+#include <string>
+
+#include <gtest/gtest.h>
+
+#include "core/rank_joints.h"
+#include "core/reduce_skeleton.h"
+#include "core/reference_solver.h"
+#include "core/solve_levels.h"
+#include "io/asset.h"
+#include "pipeline/bake.h"
+#include "proto/level_format.h"
+
+namespace motionlod::pipeline {
+namespace {
+
+namespace fs = std::filesystem;
+
+fs::path DataPath(const std::string& relative) { return fs::path(MOTIONLOD_SHARED_DATA) / relative; }
+
+struct RealScene {
+  BakeInputs inputs;
+  core::JointRanking ranking;
+};
+
+// Loads a file (and an optional separate motion), samples `fps` (0 = source), ranks.
+RealScene Load(const std::string& file, double fps = 0, int max_frames = 0) {
+  RealScene scene;
+  auto asset = io::LoadAssetFile(DataPath(file));
+  EXPECT_TRUE(asset.ok()) << file << ": " << asset.status().ToString();
+  BakeRequest request;
+  request.character = *asset;
+  request.fps = fps;
+  auto inputs = PrepareInputs(request);
+  EXPECT_TRUE(inputs.ok()) << file << ": " << inputs.status().ToString();
+  scene.inputs = std::move(*inputs);
+  core::Motion& m = scene.inputs.motion;
+  if (max_frames > 0 && m.frame_count > max_frames) {
+    m.frame_count = max_frames;
+    m.joint_world.resize(static_cast<size_t>(max_frames) * m.joint_count);
+  }
+  scene.ranking = *core::RankJointsJob{scene.inputs.character.get(), &m, {}}.Run();
+  return scene;
+}
+
+std::shared_ptr<const core::PreparedMotion> Prepare(const RealScene& s, core::Variant variant) {
+  core::SolveSettings settings;
+  settings.variant = variant;
+  auto prepared = core::PreparedMotion::Create(s.inputs.character, s.inputs.motion, settings);
+  EXPECT_TRUE(prepared.ok()) << prepared.status().ToString();
+  return *prepared;
+}
+
+core::ReducedSkeleton Level(const RealScene& s, int kept) {
+  return *core::ReduceSkeletonToCount(*s.inputs.character, s.ranking, kept);
+}
+
+class RealData : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    if (!fs::exists(DataPath("MANIFEST.md"))) GTEST_SKIP() << "../shared/data is absent";
+  }
+};
+
+TEST_F(RealData, FastSolverEqualsTheNaiveDenseSolvePerFrame) {
+  for (const char* file : {"characters/Fox.glb", "characters/CesiumMan.glb"}) {
+    const RealScene s = Load(file, 0, 12);
+    const int n = s.inputs.character->joint_count();
+    for (core::Variant variant : {core::Variant::kVP, core::Variant::kVPNO}) {
+      const auto prepared = Prepare(s, variant);
+      for (int kept : {n, n / 2, 3}) {
+        const core::ReducedSkeleton level = Level(s, kept);
+        const auto fast = prepared->SolveLeastSquares(level);
+        ASSERT_TRUE(fast.ok());
+        for (int t : {0, 5, 11}) {
+          const auto naive = core::SolveFrameNaive(*prepared, level, t);
+          for (int slot = 0; slot < kept; ++slot) {
+            const core::Affine34d k = fast->block<4, 3>(4 * slot, 3 * t).transpose();
+            EXPECT_LE((k - naive[slot]).norm(), 1e-9 * naive[slot].norm())
+                << file << " " << core::VariantName(variant) << " kept " << kept << " t " << t;
+          }
+        }
+      }
+    }
+  }
+}
+
+TEST_F(RealData, NoJointRemovedReproducesTheOriginal) {
+  for (const char* file : {"characters/CesiumMan.glb", "characters/Fox.glb", "characters/Orc.gltf",
+                           "characters/RobotExpressive.glb", "characters/stormtrooper.dae",
+                           "characters/Rig_Medium_General.glb", "motions/cmu_131_01.bvh"}) {
+    const RealScene s = Load(file, 0, 60);
+    for (core::Variant variant : {core::Variant::kVPNO, core::Variant::kVPNOPD}) {
+      const auto prepared = Prepare(s, variant);
+      auto result = prepared->SolveLevel(Level(s, s.inputs.character->joint_count()));
+      ASSERT_TRUE(result.ok()) << file;
+      EXPECT_LT(result->optimized.mean_e, 1e-9) << file << " " << core::VariantName(variant);
+      EXPECT_LT(result->optimized.max_vertex_error_pct, 1e-3) << file;
+    }
+  }
+}
+
+TEST_F(RealData, LeastSquaresVariantsAreAtOrBelowTheBaselineAtEveryLevel) {
+  for (const char* file : {"characters/Fox.glb", "characters/CesiumMan.glb", "motions/pirouette.bvh"}) {
+    const RealScene s = Load(file, 30, 90);
+    const auto vpno = Prepare(s, core::Variant::kVPNO);
+    const auto vp = Prepare(s, core::Variant::kVP);
+    for (int kept = s.ranking.locked_count; kept <= s.inputs.character->joint_count(); ++kept) {
+      const core::ReducedSkeleton level = Level(s, kept);
+      const auto a = vpno->SolveLevel(level);
+      const auto b = vp->SolveLevel(level);
+      ASSERT_TRUE(a.ok() && b.ok());
+      for (size_t t = 0; t < a->optimized.e.size(); ++t) {
+        EXPECT_LE(a->optimized.e[t], a->baseline.e[t] * (1 + 1e-9) + 1e-12) << file << " " << kept;
+        const double ep = b->optimized.ep_vertex[t] + b->optimized.ep_joint[t];
+        const double ep_base = b->baseline.ep_vertex[t] + b->baseline.ep_joint[t];
+        EXPECT_LE(ep, ep_base * (1 + 1e-9) + 1e-15) << file << " " << kept;
+      }
+    }
+  }
+}
+
+TEST_F(RealData, ErrorsAreInvariantToARigidTransformOfTheWholeMotion) {
+  RealScene s = Load("characters/CesiumMan.glb", 0, 30);
+  RealScene moved = s;
+  core::Affine34d rigid;
+  rigid.leftCols<3>() = Eigen::AngleAxisd(0.9, core::Vec3d(0.3, -1, 0.5).normalized()).toRotationMatrix();
+  rigid.col(3) << 12.0, -3.0, 40.0;
+  for (core::Affine34d& w : moved.inputs.motion.joint_world) w = core::ComposeAffine(rigid, w);
+  for (core::Variant variant : {core::Variant::kVP, core::Variant::kVPNO, core::Variant::kVPPD,
+                                core::Variant::kVPNOPD}) {
+    const auto a = Prepare(s, variant);
+    const auto b = Prepare(moved, variant);
+    for (int kept : {10, 4}) {
+      const auto ra = a->SolveLevel(Level(s, kept));
+      const auto rb = b->SolveLevel(Level(moved, kept));
+      ASSERT_TRUE(ra.ok() && rb.ok());
+      EXPECT_NEAR(ra->optimized.mean_e, rb->optimized.mean_e, 1e-6 * ra->optimized.mean_e + 1e-12);
+      EXPECT_NEAR(ra->optimized.max_vertex_error_pct, rb->optimized.max_vertex_error_pct,
+                  1e-4 * ra->optimized.max_vertex_error_pct + 1e-6);
+      EXPECT_NEAR(ra->baseline.mean_e, rb->baseline.mean_e, 1e-9 * ra->baseline.mean_e + 1e-12);
+    }
+  }
+}
+
+TEST_F(RealData, RigidVariantsStoreRotationsAndReSolvedTranslationHelps) {
+  const RealScene s = Load("characters/RobotExpressive.glb", 0, 40);
+  const auto prepared = Prepare(s, core::Variant::kVPNOPD);
+  core::SolveSettings keep;
+  keep.variant = core::Variant::kVPNOPD;
+  keep.resolve_rigid_translation = false;
+  const auto kept_t = *core::PreparedMotion::Create(s.inputs.character, s.inputs.motion, keep);
+  for (int kept : {30, 15, 6}) {
+    const auto r = prepared->SolveLevel(Level(s, kept));
+    ASSERT_TRUE(r.ok());
+    for (const core::Affine34f& k : r->matrices) {
+      const Eigen::Matrix3d rot = k.leftCols<3>().cast<double>();
+      ASSERT_NEAR((rot.transpose() * rot - Eigen::Matrix3d::Identity()).norm(), 0, 1e-5);
+      ASSERT_NEAR(rot.determinant(), 1.0, 1e-5);
+    }
+    const auto r_keep = kept_t->SolveLevel(Level(s, kept));
+    EXPECT_LE(r->optimized.mean_e, r_keep->optimized.mean_e * (1 + 1e-9)) << kept;
+  }
+}
+
+TEST_F(RealData, BakeWritesALevelSetThatDecodesToTheSolvedMatrices) {
+  auto asset = io::LoadAssetFile(DataPath("characters/Fox.glb"));
+  ASSERT_TRUE(asset.ok());
+  BakeRequest request;
+  request.character = *asset;
+  request.animation = "Walk";
+  request.levels = {24, 12, 5};
+  request.threads = 2;
+  auto output = Bake(request);
+  ASSERT_TRUE(output.ok()) << output.status().ToString();
+  const proto::AlignedBytes bytes = proto::AlignedBytes::CopyOf(output->level_set);
+  auto view = proto::DecodeLevelSet(bytes.bytes());
+  ASSERT_TRUE(view.ok()) << view.status().ToString();
+  ASSERT_EQ(view->level_count(), 3u);
+  EXPECT_EQ(view->joint_count(), 24u);
+  EXPECT_TRUE(view->rigid());
+  const nlohmann::json& report = output->report;
+  EXPECT_EQ(report["character"]["joints"], 24);
+  EXPECT_EQ(report["levels"].size(), 3u);
+  EXPECT_EQ(report["motion"]["frames"].get<uint32_t>(), view->frame_count());
+
+  // The same level solved in-process gives the same matrices.
+  auto inputs = PrepareInputs(request);
+  ASSERT_TRUE(inputs.ok());
+  const auto ranking = *core::RankJointsJob{inputs->character.get(), &inputs->motion, {}}.Run();
+  const auto prepared = *core::PreparedMotion::Create(inputs->character, inputs->motion, request.settings);
+  const auto level = prepared->SolveLevel(*core::ReduceSkeletonToCount(*inputs->character, ranking, 12));
+  ASSERT_TRUE(level.ok());
+  const proto::LevelView& stored = view->level(1);
+  ASSERT_EQ(stored.kept_count(), 12u);
+  for (uint32_t t = 0; t < stored.frame_count(); ++t) {
+    for (uint32_t s = 0; s < 12; ++s) {
+      const float* k = stored.matrix(t, s);
+      for (int q = 0; q < 12; ++q) {
+        ASSERT_EQ(k[q], level->matrices[t * 12 + s](q / 4, q % 4)) << t << " " << s;
+      }
+    }
+  }
+  EXPECT_FLOAT_EQ(stored.figures().max_vertex_error_pct,
+                  static_cast<float>(level->optimized.max_vertex_error_pct));
+}
+
+}  // namespace
+}  // namespace motionlod::pipeline

@@ -1,0 +1,152 @@
+// The motionlod command as users run it: a real process, real files, exit codes.
+#include <sys/wait.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "proto/level_format.h"
+
+namespace motionlod::tools {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct Run {
+  int exit_code = -1;
+  std::string output;  // stdout and stderr
+};
+
+Run Exec(const std::string& args) {
+  const std::string command = std::string(MOTIONLOD_TOOL) + " " + args + " 2>&1";
+  Run run;
+  FILE* pipe = ::popen(command.c_str(), "r");
+  if (pipe == nullptr) return run;
+  char buffer[4096];
+  while (size_t n = std::fread(buffer, 1, sizeof buffer, pipe)) run.output.append(buffer, n);
+  const int status = ::pclose(pipe);
+  run.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return run;
+}
+
+std::string ReadAll(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+class Cli : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("motionlod_cli_" + std::to_string(::getpid()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  std::string Sample() const { return std::string(MOTIONLOD_SOURCE_DIR) + "/samples/Rig_Medium_MovementBasic.glb"; }
+  fs::path dir_;
+};
+
+TEST_F(Cli, BakesTheSampleWithTheDefaultLadder) {
+  const fs::path out = dir_ / "out";
+  const Run run = Exec(Sample() + " --threads 2 --animation Walking_A --out " + out.string());
+  ASSERT_EQ(run.exit_code, 2) << "a missing subcommand is a usage error: " << run.output;
+  const Run bake = Exec("bake " + Sample() + " --threads 2 --animation Walking_A --out " + out.string());
+  ASSERT_EQ(bake.exit_code, 0) << bake.output;
+  EXPECT_NE(bake.output.find("max_px@1px"), std::string::npos) << bake.output;
+
+  const nlohmann::json report = nlohmann::json::parse(ReadAll(out / "report.json"));
+  EXPECT_EQ(report["character"]["joints"], 23);
+  EXPECT_GT(report["character"]["vertices"].get<int>(), 6000);
+  EXPECT_EQ(report["motion"]["fps"].get<double>(), 30.0);
+  EXPECT_EQ(report["motion"]["frames"], 33);
+  EXPECT_EQ(report["variant"], "vpno+pd");
+  EXPECT_GT(report["timing"]["bake_seconds"].get<double>(), 0.0);
+  EXPECT_GT(report["timing"]["skinning_pass_seconds"].get<double>(), 0.0);
+  const auto& levels = report["levels"];
+  ASSERT_GE(levels.size(), 4u);
+  EXPECT_EQ(levels[0]["joints"], 23);
+  EXPECT_TRUE(levels[0]["max_px_for_1px_error"].is_null() ||
+              levels[0]["max_px_for_1px_error"].get<double>() > 1e4);
+  for (size_t l = 1; l < levels.size(); ++l) {
+    EXPECT_LT(levels[l]["joints"].get<int>(), levels[l - 1]["joints"].get<int>());
+    for (const char* field : {"removed", "mean_E", "baseline_mean_E", "max_vertex_error_pct",
+                              "baseline_max_vertex_error_pct", "mean_vertex_error_pct",
+                              "mean_normal_error_deg", "max_px_for_1px_error"}) {
+      EXPECT_TRUE(levels[l].contains(field)) << field;
+    }
+    EXPECT_EQ(levels[l]["removed"].size(), 23u - levels[l]["joints"].get<unsigned>());
+  }
+  const std::string bytes = ReadAll(out / "levels.mlod");
+  const proto::AlignedBytes aligned = proto::AlignedBytes::CopyOf(bytes);
+  auto view = proto::DecodeLevelSet(aligned.bytes());
+  ASSERT_TRUE(view.ok()) << view.status().ToString();
+  EXPECT_EQ(view->level_count(), levels.size());
+  EXPECT_EQ(view->frame_count(), 33u);
+  // Nothing but the two outputs, no temporary left behind.
+  int entries = 0;
+  for ([[maybe_unused]] const auto& e : fs::directory_iterator(dir_)) ++entries;
+  EXPECT_EQ(entries, 1);
+
+  const Run plot = Exec("plot " + (out / "report.json").string() + " -o " + (dir_ / "fig.svg").string());
+  ASSERT_EQ(plot.exit_code, 0) << plot.output;
+  const std::string svg = ReadAll(dir_ / "fig.svg");
+  EXPECT_NE(svg.find("<polyline"), std::string::npos);
+  EXPECT_NE(svg.find("vpno+pd"), std::string::npos);
+}
+
+TEST_F(Cli, RankPrintsTheRemovalOrderWithTheRootLast) {
+  const Run run = Exec("rank " + Sample() + " --animation Running_A --json");
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  const nlohmann::json table = nlohmann::json::parse(run.output);
+  ASSERT_EQ(table.size(), 23u);
+  EXPECT_EQ(table.back()["index"], 0);
+  EXPECT_FALSE(table.back()["removable"].get<bool>());
+  for (size_t r = 1; r + 1 < table.size(); ++r) {
+    EXPECT_LE(table[r - 1]["priority"].get<double>(), table[r]["priority"].get<double>());
+  }
+}
+
+TEST_F(Cli, BadInputExitsWithTwoAndWritesNothing) {
+  const fs::path truncated = dir_ / "truncated.glb";
+  {
+    const std::string bytes = ReadAll(Sample());
+    std::ofstream(truncated, std::ios::binary) << bytes.substr(0, bytes.size() / 3);
+  }
+  const fs::path garbage = dir_ / "garbage.fbx";
+  std::ofstream(garbage) << "this is not an FBX file";
+  const fs::path out = dir_ / "out";
+  struct Case {
+    std::string args;
+    std::string message;
+  };
+  const Case cases[] = {
+      {"bake " + (dir_ / "missing.glb").string() + " --out " + out.string(), "missing.glb"},
+      {"bake " + truncated.string() + " --out " + out.string(), "truncated.glb"},
+      {"bake " + garbage.string() + " --out " + out.string(), "garbage.fbx"},
+      {"bake " + Sample() + " --variant vpx --out " + out.string(), "unknown variant"},
+      {"bake " + Sample() + " --levels 40 --out " + out.string(), "outside"},
+      {"bake " + Sample() + " --animation Nope --out " + out.string(), "Nope"},
+      {"bake " + Sample() + " --lock NoSuchJoint --out " + out.string(), "NoSuchJoint"},
+      {"bake " + Sample() + " --fps -3 --out " + out.string(), "fps"},
+      {"bake " + Sample(), "--out"},
+      {"plot " + truncated.string() + " -o " + (dir_ / "x.svg").string(), "not valid JSON"},
+  };
+  for (const Case& c : cases) {
+    const Run run = Exec(c.args);
+    EXPECT_EQ(run.exit_code, 2) << c.args << "\n" << run.output;
+    EXPECT_NE(run.output.find(c.message), std::string::npos) << c.args << "\n" << run.output;
+    EXPECT_FALSE(fs::exists(out)) << c.args;
+  }
+}
+
+}  // namespace
+}  // namespace motionlod::tools
