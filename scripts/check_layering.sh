@@ -1,0 +1,28 @@
+#!/usr/bin/env bash
+# Fails when a layer includes what STYLE.md keeps out of it (the arrows of the layers).
+set -uo pipefail
+cd "$(dirname "$0")/.."
+status=0
+forbid() {  # forbid DIR REGEX WHY
+  local hits
+  hits=$(grep -REn --include='*.h' --include='*.cc' "^#include [<\"]($2)" "$1" 2>/dev/null)
+  if [ -n "$hits" ]; then
+    echo "layering: $1 must not include $3:"
+    echo "$hits"
+    status=1
+  fi
+}
+forbid core 'iostream|fstream|cstdio|stdio\.h|filesystem|thread|mutex|future|spdlog|nlohmann|httplib|assimp|io/|proto/|pipeline/|tools/|server/|client/' \
+  "I/O, threads, logging, JSON, HTTP, Assimp or a higher layer"
+forbid base 'Eigen|spdlog|nlohmann|httplib|assimp|core/|io/|proto/' "anything but the standard library"
+forbid proto 'Eigen|core/|io/|pipeline/|spdlog|httplib|assimp' "Eigen, core, io, logging, HTTP or Assimp"
+forbid io 'spdlog|httplib|pipeline/|tools/|server/|client/|proto/' "logging, HTTP or a higher layer"
+forbid pipeline 'spdlog|httplib|tools/|server/|client/' "logging, HTTP or a higher layer"
+# Assimp stays behind one file of io.
+assimp_files=$(grep -RlE '^#include [<"]assimp/' io | sort | tr '\n' ' ')
+if [ "$assimp_files" != "io/assimp_scene.cc " ]; then
+  echo "layering: only io/assimp_scene.cc may include Assimp, found: $assimp_files"
+  status=1
+fi
+[ $status -eq 0 ] && echo "layering: ok"
+exit $status
