@@ -17,14 +17,14 @@ namespace {
 
 namespace fs = std::filesystem;
 
-struct Run {
+struct ProcessResult {
   int exit_code = -1;
   std::string output;  // stdout and stderr
 };
 
-Run Exec(const std::string& args) {
+ProcessResult Exec(const std::string& args) {
   const std::string command = std::string(MOTIONLOD_TOOL) + " " + args + " 2>&1";
-  Run run;
+  ProcessResult run;
   FILE* pipe = ::popen(command.c_str(), "r");
   if (pipe == nullptr) return run;
   char buffer[4096];
@@ -57,9 +57,9 @@ class Cli : public ::testing::Test {
 
 TEST_F(Cli, BakesTheSampleWithTheDefaultLadder) {
   const fs::path out = dir_ / "out";
-  const Run run = Exec(Sample() + " --threads 2 --animation Walking_A --out " + out.string());
+  const ProcessResult run = Exec(Sample() + " --threads 2 --animation Walking_A --out " + out.string());
   ASSERT_EQ(run.exit_code, 2) << "a missing subcommand is a usage error: " << run.output;
-  const Run bake = Exec("bake " + Sample() + " --threads 2 --animation Walking_A --out " + out.string());
+  const ProcessResult bake = Exec("bake " + Sample() + " --threads 2 --animation Walking_A --out " + out.string());
   ASSERT_EQ(bake.exit_code, 0) << bake.output;
   EXPECT_NE(bake.output.find("max_px@1px"), std::string::npos) << bake.output;
 
@@ -96,7 +96,7 @@ TEST_F(Cli, BakesTheSampleWithTheDefaultLadder) {
   for ([[maybe_unused]] const auto& e : fs::directory_iterator(dir_)) ++entries;
   EXPECT_EQ(entries, 1);
 
-  const Run plot = Exec("plot " + (out / "report.json").string() + " -o " + (dir_ / "fig.svg").string());
+  const ProcessResult plot = Exec("plot " + (out / "report.json").string() + " -o " + (dir_ / "fig.svg").string());
   ASSERT_EQ(plot.exit_code, 0) << plot.output;
   const std::string svg = ReadAll(dir_ / "fig.svg");
   EXPECT_NE(svg.find("<polyline"), std::string::npos);
@@ -104,7 +104,7 @@ TEST_F(Cli, BakesTheSampleWithTheDefaultLadder) {
 }
 
 TEST_F(Cli, RankPrintsTheRemovalOrderWithTheRootLast) {
-  const Run run = Exec("rank " + Sample() + " --animation Running_A --json");
+  const ProcessResult run = Exec("rank " + Sample() + " --animation Running_A --json");
   ASSERT_EQ(run.exit_code, 0) << run.output;
   const nlohmann::json table = nlohmann::json::parse(run.output);
   ASSERT_EQ(table.size(), 23u);
@@ -141,7 +141,7 @@ TEST_F(Cli, BadInputExitsWithTwoAndWritesNothing) {
       {"plot " + truncated.string() + " -o " + (dir_ / "x.svg").string(), "not valid JSON"},
   };
   for (const Case& c : cases) {
-    const Run run = Exec(c.args);
+    const ProcessResult run = Exec(c.args);
     EXPECT_EQ(run.exit_code, 2) << c.args << "\n" << run.output;
     EXPECT_NE(run.output.find(c.message), std::string::npos) << c.args << "\n" << run.output;
     EXPECT_FALSE(fs::exists(out)) << c.args;

@@ -1,0 +1,234 @@
+#include "io/clips.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <numbers>
+
+namespace motionlod::io {
+namespace {
+
+using Eigen::Quaterniond;
+using Eigen::Vector3d;
+
+TEST(DeriveSourceRate, BvhFrameTimeReadsAsWholeRate) {
+  // Frame Time .0083333 gives Assimp 120.0005 ticks per second, one key per tick.
+  std::vector<double> ticks;
+  for (int k = 0; k <= 993; ++k) ticks.push_back(k);
+  const SourceRate rate = DeriveSourceRate(ticks, 1.0 / 0.0083333, 30);
+  EXPECT_EQ(rate.fps, 120.0);
+  EXPECT_DOUBLE_EQ(993 * rate.seconds_per_tick, 993.0 / 120.0);
+}
+
+TEST(DeriveSourceRate, GltfMillisecondTicksGiveTheKeySpacing) {
+  std::vector<double> ticks;
+  for (int k = 0; k <= 80; ++k) ticks.push_back(static_cast<float>(k * 1000.0 / 24.0));
+  const SourceRate rate = DeriveSourceRate(ticks, 1000, 30);
+  EXPECT_EQ(rate.fps, 24.0);
+  EXPECT_NEAR(80 * 1000.0 / 24.0 * rate.seconds_per_tick, 80.0 / 24.0, 1e-6);
+}
+
+TEST(DeriveSourceRate, SparseChannelsDoNotHideTheFrameSpacing) {
+  // Union of a dense channel (every 1/30 s) and a two-key channel.
+  std::vector<double> ticks = {0, 1000};
+  for (int k = 0; k <= 30; ++k) ticks.push_back(k * 1000.0 / 30.0);
+  EXPECT_EQ(DeriveSourceRate(ticks, 1000, 24).fps, 30.0);
+}
+
+TEST(DeriveSourceRate, NtscRateIsKept) {
+  std::vector<double> ticks;
+  for (int k = 0; k < 100; ++k) ticks.push_back(k * 1001.0 / 30.0);
+  EXPECT_NEAR(DeriveSourceRate(ticks, 1000, 24).fps, 30000.0 / 1001.0, 1e-9);
+}
+
+TEST(DeriveSourceRate, SingleKeyFallsBack) {
+  EXPECT_EQ(DeriveSourceRate({0}, 1000, 24).fps, 24.0);
+  EXPECT_EQ(DeriveSourceRate({}, 1000, 30).fps, 30.0);
+}
+
+TEST(FrameCount, FloorsWithTolerance) {
+  EXPECT_EQ(FrameCount(993.0 / 120.0, 120), 994);
+  EXPECT_EQ(FrameCount(993.0 / 120.0, 30), 249);
+  EXPECT_EQ(FrameCount(0, 30), 1);
+  EXPECT_EQ(FrameCount(80.0 / 24.0, 24), 81);
+}
+
+// One node "n" (rest: translation (0, 0, 5)) animated by `animation`.
+Scene OneNodeScene(SceneAnimation animation) {
+  Scene scene;
+  SceneNode node;
+  node.name = "n";
+  node.local = core::IdentityAffine();
+  node.local.col(3) = Vector3d(0, 0, 5);
+  DecomposeLocal(node);
+  scene.nodes.push_back(node);
+  scene.animations.push_back(std::move(animation));
+  return scene;
+}
+
+SceneChannel Channel(const std::string& node) {
+  SceneChannel c;
+  c.node_name = node;
+  return c;
+}
+
+TEST(PoseSampler, LerpsPositionsSlerpsRotationsAndClampsOutsideTheKeys) {
+  SceneAnimation a;
+  a.name = "move";
+  a.ticks_per_second = 10;
+  a.duration_ticks = 10;
+  SceneChannel c = Channel("n");
+  c.position_times = {0, 10};
+  c.positions = {Vector3d(0, 0, 0), Vector3d(2, 4, 0)};
+  c.rotation_times = {0, 10};
+  c.rotations = {Quaterniond::Identity(),
+                 Quaterniond(Eigen::AngleAxisd(std::numbers::pi / 2, Vector3d::UnitZ()))};
+  a.channels.push_back(c);
+  const Scene scene = OneNodeScene(a);
+  std::vector<std::string> warnings;
+  const StatusOr<std::vector<Clip>> clips = BuildClips(scene, {1}, warnings);
+  ASSERT_TRUE(clips.ok()) << clips.status().ToString();
+  const Clip& clip = clips->front();
+  EXPECT_EQ(clip.info.name, "move");
+  EXPECT_DOUBLE_EQ(clip.info.duration_seconds, 1.0);
+
+  PoseSampler sampler(scene.nodes, {0});
+  core::Affine34d world;
+  sampler.Evaluate(&clip, 0.5, &world);
+  EXPECT_TRUE(world.col(3).isApprox(Vector3d(1, 2, 0), 1e-12));
+  const Eigen::Matrix3d expected =
+      Eigen::AngleAxisd(std::numbers::pi / 4, Vector3d::UnitZ()).toRotationMatrix();
+  EXPECT_TRUE(world.leftCols<3>().isApprox(expected, 1e-12));
+
+  sampler.Evaluate(&clip, -1.0, &world);
+  EXPECT_TRUE(world.col(3).isApprox(Vector3d(0, 0, 0), 1e-12));
+  sampler.Evaluate(&clip, 7.0, &world);
+  EXPECT_TRUE(world.col(3).isApprox(Vector3d(2, 4, 0), 1e-12));
+}
+
+TEST(PoseSampler, SlerpTakesTheShortArc) {
+  SceneAnimation a;
+  a.name = "turn";
+  a.ticks_per_second = 1;
+  a.duration_ticks = 1;
+  SceneChannel c = Channel("n");
+  c.rotation_times = {0, 1};
+  const Quaterniond end(Eigen::AngleAxisd(0.2, Vector3d::UnitY()));
+  c.rotations = {Quaterniond::Identity(), Quaterniond(-end.coeffs())};  // same rotation, far sign
+  a.channels.push_back(c);
+  const Scene scene = OneNodeScene(a);
+  std::vector<std::string> warnings;
+  const auto clips = BuildClips(scene, {1}, warnings);
+  ASSERT_TRUE(clips.ok());
+  PoseSampler sampler(scene.nodes, {0});
+  core::Affine34d world;
+  sampler.Evaluate(&clips->front(), 0.5, &world);
+  EXPECT_TRUE(world.leftCols<3>().isApprox(
+      Eigen::AngleAxisd(0.1, Vector3d::UnitY()).toRotationMatrix(), 1e-12));
+}
+
+TEST(PoseSampler, MissingChannelsKeepTheRestValues) {
+  SceneAnimation a;
+  a.name = "only_rotation";
+  a.ticks_per_second = 1;
+  a.duration_ticks = 1;
+  SceneChannel c = Channel("n");
+  c.rotation_times = {0};
+  c.rotations = {Quaterniond(Eigen::AngleAxisd(1.0, Vector3d::UnitX()))};
+  a.channels.push_back(c);
+  const Scene scene = OneNodeScene(a);
+  std::vector<std::string> warnings;
+  const auto clips = BuildClips(scene, {1}, warnings);
+  ASSERT_TRUE(clips.ok());
+  PoseSampler sampler(scene.nodes, {0});
+  core::Affine34d world;
+  sampler.Evaluate(&clips->front(), 0.3, &world);
+  EXPECT_TRUE(world.col(3).isApprox(Vector3d(0, 0, 5), 1e-12));  // rest translation
+  sampler.Evaluate(nullptr, 0.3, &world);                        // rest pose
+  EXPECT_TRUE(world.isApprox(scene.nodes[0].local, 1e-12));
+}
+
+TEST(BuildClips, MergesUnnamedSingleChannelAnimationsOfEqualLength) {
+  Scene scene;
+  for (const char* name : {"a", "b", "c"}) {
+    SceneNode node;
+    node.name = name;
+    node.parent = scene.nodes.empty() ? -1 : 0;
+    scene.nodes.push_back(node);
+  }
+  for (const char* name : {"a", "b", "c"}) {
+    SceneAnimation animation;
+    animation.ticks_per_second = 1000;
+    animation.duration_ticks = 2000;
+    SceneChannel c = Channel(name);
+    c.position_times = {0, 1000, 2000};
+    c.positions = {Vector3d::Zero(), Vector3d::UnitX(), Vector3d::UnitY()};
+    animation.channels.push_back(c);
+    scene.animations.push_back(animation);
+  }
+  SceneAnimation other;  // a different length stays apart
+  other.ticks_per_second = 1000;
+  other.duration_ticks = 500;
+  other.channels.push_back(Channel("a"));
+  scene.animations.push_back(other);
+  std::vector<std::string> warnings;
+  const auto clips = BuildClips(scene, std::vector<char>(3, 0), warnings);
+  ASSERT_TRUE(clips.ok());
+  ASSERT_EQ(clips->size(), 2u);
+  EXPECT_EQ((*clips)[0].tracks.size(), 3u);
+  EXPECT_EQ((*clips)[0].info.name, "animation");
+  EXPECT_EQ((*clips)[1].info.name, "animation_1");
+  EXPECT_DOUBLE_EQ((*clips)[0].info.duration_seconds, 2.0);
+  EXPECT_EQ((*clips)[0].info.source_fps, 1.0);
+  EXPECT_EQ((*clips)[0].info.source_frame_count, 3);
+  EXPECT_FALSE(warnings.empty());
+}
+
+TEST(BuildClips, RejectsZeroLengthRotationKeys) {
+  SceneAnimation a;
+  a.name = "bad";
+  a.ticks_per_second = 1;
+  SceneChannel c = Channel("n");
+  c.rotation_times = {0};
+  c.rotations = {Quaterniond(0, 0, 0, 0)};
+  a.channels.push_back(c);
+  std::vector<std::string> warnings;
+  const auto clips = BuildClips(OneNodeScene(a), {1}, warnings);
+  EXPECT_EQ(clips.status().code(), StatusCode::kInvalidArgument);
+}
+
+TEST(BuildClips, RaisesZeroScalesSoMatricesStayInvertible) {
+  SceneAnimation a;
+  a.name = "spawn";
+  a.ticks_per_second = 1;
+  a.duration_ticks = 1;
+  SceneChannel c = Channel("n");
+  c.scaling_times = {0, 1};
+  c.scalings = {Vector3d::Zero(), Vector3d::Ones()};
+  a.channels.push_back(c);
+  const Scene scene = OneNodeScene(a);
+  std::vector<std::string> warnings;
+  const auto clips = BuildClips(scene, {1}, warnings);
+  ASSERT_TRUE(clips.ok());
+  PoseSampler sampler(scene.nodes, {0});
+  core::Affine34d world;
+  sampler.Evaluate(&clips->front(), 0, &world);
+  EXPECT_GT(std::abs(world.leftCols<3>().determinant()), 0);
+  EXPECT_EQ(warnings.size(), 1u);
+}
+
+TEST(BuildClips, IgnoresChannelsOfUnknownNodesWithAWarning) {
+  SceneAnimation a;
+  a.name = "ghost";
+  a.ticks_per_second = 1;
+  a.channels.push_back(Channel("nobody"));
+  std::vector<std::string> warnings;
+  const auto clips = BuildClips(OneNodeScene(a), {1}, warnings);
+  ASSERT_TRUE(clips.ok());
+  EXPECT_TRUE(clips->front().tracks.empty());
+  ASSERT_EQ(warnings.size(), 1u);
+  EXPECT_NE(warnings[0].find("nobody"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace motionlod::io
