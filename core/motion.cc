@@ -25,13 +25,12 @@ Status ValidateMotion(const Motion& motion, const Character& character) {
   for (int t = 0; t < motion.frame_count; ++t) {
     for (int j = 0; j < motion.joint_count; ++j) {
       const Affine34d& m = motion.world(t, j);
+      const double scale = m.leftCols<3>().norm();
+      const bool finite = m.allFinite();
+      if (finite && std::abs(m.leftCols<3>().determinant()) > 1e-12 * scale * scale * scale) continue;
       const std::string where = "frame " + std::to_string(t) + ", joint '" +
                                 character.skeleton().joint_names[j] + "'";
-      if (!m.allFinite()) return InvalidArgument("non-finite joint matrix at " + where);
-      const double scale = m.leftCols<3>().norm();
-      if (!(std::abs(m.leftCols<3>().determinant()) > 1e-12 * scale * scale * scale)) {
-        return InvalidArgument("singular joint matrix at " + where);
-      }
+      return InvalidArgument((finite ? "singular joint matrix at " : "non-finite joint matrix at ") + where);
     }
   }
   return Status::Ok();

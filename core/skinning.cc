@@ -5,8 +5,8 @@
 namespace motionlod::core {
 
 Status SkinningJob::Validate() const {
-  if (skin == nullptr) return InvalidArgument("SkinningJob: no skin");
-  const size_t p = skin->positions.size();
+  if (character == nullptr) return InvalidArgument("SkinningJob: no character");
+  const size_t p = static_cast<size_t>(character->vertex_count());
   if (out_positions.size() != p) {
     return InvalidArgument("SkinningJob: out_positions holds " +
                            std::to_string(out_positions.size()) + " vertices, the skin " +
@@ -15,19 +15,17 @@ Status SkinningJob::Validate() const {
   if (!out_normals.empty() && out_normals.size() != p) {
     return InvalidArgument("SkinningJob: out_normals must be empty or hold every vertex");
   }
-  for (int32_t j : skin->influence_joints) {
-    if (j < 0 || static_cast<size_t>(j) >= skinning_matrices.size()) {
-      return InvalidArgument("SkinningJob: the skin references joint " + std::to_string(j) +
-                             " but only " + std::to_string(skinning_matrices.size()) +
-                             " skinning matrices were given");
-    }
+  if (skinning_matrices.size() != static_cast<size_t>(character->joint_count())) {
+    return InvalidArgument("SkinningJob: " + std::to_string(skinning_matrices.size()) +
+                           " skinning matrices for " + std::to_string(character->joint_count()) +
+                           " joints");
   }
   return Status::Ok();
 }
 
 Status SkinningJob::Run() const {
   if (Status status = Validate(); !status.ok()) return status;
-  const RawSkin& k = *skin;
+  const RawSkin& k = character->skin();
   const size_t p = k.positions.size();
   const bool with_normals = !out_normals.empty();
   const uint32_t* offsets = k.influence_offsets.data();

@@ -14,12 +14,12 @@ namespace motionlod::core {
 // One frame: skinning matrices in, posed positions and normals out (caller-owned).
 // Streamed data is float; nothing is allocated.
 struct SkinningJob {
-  const RawSkin* skin = nullptr;
+  const Character* character = nullptr;  // validated by BuildCharacter
   std::span<const Affine34f> skinning_matrices;  // n, K_j for this frame
   std::span<Vec3f> out_positions;                // p
   std::span<Vec3f> out_normals;                  // p, or empty to skip normals
 
-  // Shapes and joint indices; the skin itself is validated by BuildCharacter.
+  // Shapes only: the skin's joint indices were checked by BuildCharacter.
   Status Validate() const;
   // Validates first and touches nothing when invalid.
   Status Run() const;

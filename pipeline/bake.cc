@@ -145,7 +145,7 @@ double SkinningPassSeconds(const core::Character& character, const core::Motion&
       for (int j = 0; j < n; ++j) {
         s.palette[j] = core::ComposeAffine(motion.world(t, j), inverse_bind[j]).cast<float>();
       }
-      const core::SkinningJob job{&character.skin(), s.palette, s.positions, s.normals};
+      const core::SkinningJob job{&character, s.palette, s.positions, s.normals};
       (void)job.Run();
     }
   });
@@ -201,24 +201,37 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
   const auto on_level_done = [&](int) {
     ++solved_count;
     report_progress(solve_begin + (solve_end - solve_begin) * solved_count /
-                                      std::max<size_t>(counts.size() + 4, 1),
+                                      std::max<size_t>(counts.size(), 1),
                     "solve");
   };
   if (request.levels.empty() && !request.all_levels) {
     // The smallest useful skeleton: bisect the kept count over [minimum, n] on the
     // optimised maximum vertex error (exact at n). The error grows as joints go, though
     // not strictly, so this finds a count that meets the bound with the one below failing.
+    // Probes run on at most kProbeFrames evenly strided frames: they only steer the
+    // search, and the chosen level is then solved on every frame with the others.
+    constexpr int kProbeFrames = 64;
+    const int stride = (motion.frame_count + kProbeFrames - 1) / kProbeFrames;
+    core::Motion probe_motion;
+    probe_motion.fps = motion.fps / stride;
+    probe_motion.joint_count = n;
+    for (int t = 0; t < motion.frame_count; t += stride) {
+      probe_motion.joint_world.insert(probe_motion.joint_world.end(),
+                                      motion.joint_world.begin() + static_cast<size_t>(t) * n,
+                                      motion.joint_world.begin() + static_cast<size_t>(t + 1) * n);
+      ++probe_motion.frame_count;
+    }
+    auto probe = core::PreparedMotion::Create(inputs->character, probe_motion, request.settings);
+    if (!probe.ok()) return probe.status();
+    std::map<int, core::LevelResult> probed;
     const double bound = request.smallest_useful_error_pct;
     int lo = minimum, hi = n;
     while (lo < hi) {
       const int mid = lo + (hi - lo) / 2;
-      if (!solved.count(mid)) {
-        if (Status status = SolveCounts(**prepared, *ranking, {mid}, 1, solved, on_level_done, cancel);
-            !status.ok()) {
-          return status;
-        }
+      if (Status status = SolveCounts(**probe, *ranking, {mid}, 1, probed, {}, cancel); !status.ok()) {
+        return status;
       }
-      if (solved.at(mid).optimized.max_vertex_error_pct <= bound) {
+      if (probed.at(mid).optimized.max_vertex_error_pct <= bound) {
         hi = mid;
       } else {
         lo = mid + 1;
@@ -228,11 +241,7 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
     std::sort(counts.begin(), counts.end(), std::greater<>());
     counts.erase(std::unique(counts.begin(), counts.end()), counts.end());
   }
-  std::vector<int> pending;
-  for (int count : counts) {
-    if (!solved.count(count)) pending.push_back(count);
-  }
-  if (Status status = SolveCounts(**prepared, *ranking, pending, threads, solved, on_level_done, cancel);
+  if (Status status = SolveCounts(**prepared, *ranking, counts, threads, solved, on_level_done, cancel);
       !status.ok()) {
     return status;
   }

@@ -169,9 +169,10 @@ void PrintLevelTable(const nlohmann::json& report) {
   std::printf("%6s %10s %10s %9s %9s %9s %9s %12s\n", "joints", "mean_E", "base_E", "max_err%",
               "base_max%", "mean_err%", "normal°", "max_px@1px");
   for (const auto& level : report["levels"]) {
-    const std::string px = level["max_px_for_1px_error"].is_null()
-                               ? "exact"
-                               : std::to_string(static_cast<int>(level["max_px_for_1px_error"].get<double>()));
+    const nlohmann::json& limit = level["max_px_for_1px_error"];
+    const std::string px = limit.is_null() || limit.get<double>() >= 1e6
+                               ? "any"
+                               : std::to_string(static_cast<long>(limit.get<double>()));
     std::printf("%6d %10.3g %10.3g %9.3f %9.3f %9.3f %9.2f %12s\n", level["joints"].get<int>(),
                 level["mean_E"].get<double>(), level["baseline_mean_E"].get<double>(),
                 level["max_vertex_error_pct"].get<double>(),
