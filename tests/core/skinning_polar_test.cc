@@ -13,7 +13,7 @@ TEST(SkinningJob, IdentityMatricesReproduceTheBindPose) {
   const auto c = testing::BuildOrDie(testing::MakeCreature());
   std::vector<Affine34f> k(c->joint_count(), IdentityAffine().cast<float>());
   std::vector<Vec3f> positions(c->vertex_count()), normals(c->vertex_count());
-  SkinningJob job{&c->skin(), k, positions, normals};
+  SkinningJob job{c.get(), k, positions, normals};
   ASSERT_TRUE(job.Run().ok());
   for (int i = 0; i < c->vertex_count(); ++i) {
     EXPECT_TRUE(positions[i].isApprox(c->skin().positions[i], 1e-6f));
@@ -26,7 +26,7 @@ TEST(SkinningJob, BlendsMatricesByWeight) {
   std::vector<Affine34f> k(c->joint_count(), IdentityAffine().cast<float>());
   k[1].col(3) << 1, 0, 0;  // spine moves +x by 1
   std::vector<Vec3f> positions(c->vertex_count());
-  ASSERT_TRUE((SkinningJob{&c->skin(), k, positions, {}}).Run().ok());
+  ASSERT_TRUE((SkinningJob{c.get(), k, positions, {}}).Run().ok());
   const RawSkin& skin = c->skin();
   for (int i = 0; i < c->vertex_count(); ++i) {
     float w_spine = 0;
@@ -41,11 +41,11 @@ TEST(SkinningJob, ValidateRejectsWrongShapesAndTouchesNothing) {
   const auto c = testing::BuildOrDie(testing::MakeCreature());
   std::vector<Affine34f> k(3, IdentityAffine().cast<float>());  // too few matrices
   std::vector<Vec3f> positions(c->vertex_count(), Vec3f::Constant(7));
-  EXPECT_FALSE((SkinningJob{&c->skin(), k, positions, {}}).Run().ok());
+  EXPECT_FALSE((SkinningJob{c.get(), k, positions, {}}).Run().ok());
   EXPECT_EQ(positions[0], Vec3f::Constant(7));
   std::vector<Affine34f> all(c->joint_count(), IdentityAffine().cast<float>());
   std::vector<Vec3f> short_positions(5);
-  EXPECT_FALSE((SkinningJob{&c->skin(), all, short_positions, {}}).Validate().ok());
+  EXPECT_FALSE((SkinningJob{c.get(), all, short_positions, {}}).Validate().ok());
   EXPECT_FALSE((SkinningJob{nullptr, all, positions, {}}).Validate().ok());
 }
 
