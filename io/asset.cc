@@ -34,6 +34,7 @@ namespace {
 
 constexpr double kMaxFps = 1000.0;
 constexpr int kMaxFrames = 1000000;
+constexpr double kMaxMatrices = 1e7;  // about 1 GB of Affine34d
 
 StatusOr<std::shared_ptr<const Asset>> Load(const SourceFile& main, const FileResolver& resolver,
                                             const LoadOptions& options) {
@@ -116,9 +117,13 @@ StatusOr<core::Motion> Asset::SampleAnimation(std::string_view name, double fps)
         std::to_string(fps));
   }
   const double frames = clip->info.duration_seconds * fps + 1;
-  if (!(frames <= kMaxFrames)) {
-    return InvalidArgument("sampling '" + clip->info.name + "' at " + std::to_string(fps) +
-                           " fps would give more than " + std::to_string(kMaxFrames) + " frames");
+  const double matrices = frames * static_cast<double>(impl_->rig.joint_nodes.size());
+  if (!(frames <= kMaxFrames) || !(matrices <= kMaxMatrices)) {
+    return InvalidArgument("sampling " + Quote(clip->info.name) + " at " + std::to_string(fps) +
+                           " fps would give " + std::to_string(frames) + " frames of " +
+                           std::to_string(impl_->rig.joint_nodes.size()) + " joints, more than " +
+                           std::to_string(kMaxFrames) + " frames or " +
+                           std::to_string(kMaxMatrices) + " matrices");
   }
   return SampleClip(*clip, impl_->nodes, impl_->rig.joint_nodes, fps);
 }

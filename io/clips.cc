@@ -7,10 +7,13 @@
 #include <set>
 #include <utility>
 
+#include "io/text.h"
+
 namespace motionlod::io {
 namespace {
 
 constexpr double kMinScale = 1e-4;
+constexpr double kMaxDurationSeconds = 24 * 3600;  // a day
 
 // Rate snapping: a whole number within 0.1%, else an NTSC rate within 0.01%.
 double SnapRate(double fps) {
@@ -103,7 +106,9 @@ SourceRate DeriveSourceRate(std::vector<double> key_ticks, double ticks_per_seco
 }
 
 int FrameCount(double duration_seconds, double fps) {
-  return static_cast<int>(std::floor(duration_seconds * fps + 1e-6)) + 1;
+  const double frames = std::floor(duration_seconds * fps + 1e-6) + 1;
+  if (!(frames < std::numeric_limits<int>::max())) return std::numeric_limits<int>::max();
+  return frames < 1 ? 1 : static_cast<int>(frames);
 }
 
 StatusOr<std::vector<Clip>> BuildClips(const Scene& scene, const std::vector<char>& preferred_nodes,
@@ -211,6 +216,11 @@ StatusOr<std::vector<Clip>> BuildClips(const Scene& scene, const std::vector<cha
     double duration = (ends[c] - start) * spt;
     const double frames = duration * rates[c].fps;
     if (std::abs(frames - std::round(frames)) < 1e-2) duration = std::round(frames) / rates[c].fps;
+    if (!(duration <= kMaxDurationSeconds)) {
+      return InvalidArgument("animation " + Quote(name) + " lasts " + std::to_string(duration) +
+                             " s, more than " + std::to_string(kMaxDurationSeconds) +
+                             " s (corrupted key times?)");
+    }
     clip.info.duration_seconds = duration;
     clip.info.source_frame_count = FrameCount(duration, rates[c].fps);
 

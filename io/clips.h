@@ -49,7 +49,7 @@ int FrameCount(double duration_seconds, double fps);
 // (preferring nodes flagged in `preferred_nodes`, see NodeNames). Unnamed animations
 // with one channel and the same duration (COLLADA2GLTF writes one glTF animation per
 // joint) merge into one clip. Clip names are made unique. Errors: InvalidArgument for
-// a zero-length rotation key or times that are not finite.
+// a zero-length rotation key or a clip longer than a day (corrupted key times).
 StatusOr<std::vector<Clip>> BuildClips(const Scene& scene, const std::vector<char>& preferred_nodes,
                                        std::vector<std::string>& warnings);
 
