@@ -1,0 +1,57 @@
+#!/usr/bin/env bash
+# Builds the benchmarks (Release, MOTIONLOD_BUILD_BENCH=ON) into build-bench/ and runs the
+# bake against one skinning pass, side by side in one run, for 1 and 2 threads, with
+# 5 repetitions in random interleaved order; then prints the markdown tables of
+# docs/PERFORMANCE.md (bench/summarize.py).
+#
+#   bash scripts/bench.sh                 full run (about 10 minutes on 2 cores)
+#   bash scripts/bench.sh --quick         vp and vpno+pd, 2 subdivided characters, 3 repetitions
+#   bash scripts/bench.sh --update-doc    also rewrite the results section of docs/PERFORMANCE.md
+#   bash scripts/bench.sh --threads 1,2,4 -- --benchmark_filter=Orc   (extra flags after --)
+#
+# Outputs: build-bench/bench-results.json (Google Benchmark JSON) and
+# build-bench/bench-results.md. Data: ../shared/data (override with --data DIR).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+threads=1,2
+repetitions=5
+min_time=0.2
+quick=()
+update_doc=0
+data=()
+extra=()
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --quick) quick=(--quick); repetitions=3; min_time=0.05 ;;
+    --update-doc) update_doc=1 ;;
+    --threads) threads="$2"; shift ;;
+    --repetitions) repetitions="$2"; shift ;;
+    --data) data=("--data=$2"); shift ;;
+    --) shift; extra=("$@"); break ;;
+    *) echo "bench.sh: unknown argument '$1'" >&2; exit 2 ;;
+  esac
+  shift
+done
+
+build=build-bench
+cmake -S . -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=Release -DMOTIONLOD_BUILD_BENCH=ON \
+  -DMOTIONLOD_BUILD_TESTS=OFF >/dev/null
+cmake --build "$build" --target motionlod_bench_bake -j "$(nproc 2>/dev/null || echo 2)"
+
+json="$build/bench-results.json"
+args=(--threads="$threads" "${quick[@]}" "${data[@]}"
+      --benchmark_repetitions="$repetitions" --benchmark_min_time="$min_time"
+      --benchmark_enable_random_interleaving=true
+      --benchmark_out="$json" --benchmark_out_format=json "${extra[@]}")
+command="$build/bench/motionlod_bench_bake ${args[*]}"
+echo "running: $command" >&2
+start=$(date +%s)
+"$build/bench/motionlod_bench_bake" "${args[@]}" >"$build/bench-console.txt"
+echo "bench: $(( $(date +%s) - start )) s" >&2
+
+python3 bench/summarize.py "$json" --command "$command" >"$build/bench-results.md"
+if [ "$update_doc" -eq 1 ]; then
+  python3 bench/summarize.py "$json" --command "$command" --doc docs/PERFORMANCE.md
+fi
+cat "$build/bench-results.md"
