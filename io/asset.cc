@@ -125,7 +125,24 @@ StatusOr<core::Motion> Asset::SampleAnimation(std::string_view name, double fps)
                            std::to_string(kMaxFrames) + " frames or " +
                            std::to_string(kMaxMatrices) + " matrices");
   }
-  return SampleClip(*clip, impl_->nodes, impl_->rig.joint_nodes, fps);
+  core::Motion motion = SampleClip(*clip, impl_->nodes, impl_->rig.joint_nodes, fps);
+  // Corrupted transforms (a zero scale in a rest matrix, say) must not reach the caller
+  // as a motion that core::ValidateMotion would reject.
+  const int n = motion.joint_count;
+  for (int t = 0; t < motion.frame_count; ++t) {
+    for (int j = 0; j < n; ++j) {
+      const core::Affine34d& m = motion.world(t, j);
+      const double scale = m.leftCols<3>().norm();
+      if (!m.allFinite() ||
+          !(std::abs(m.leftCols<3>().determinant()) > 1e-12 * scale * scale * scale)) {
+        return InvalidArgument("animation " + Quote(clip->info.name) + " gives joint " +
+                               Quote(impl_->rig.character.skeleton.joint_names[j]) +
+                               " a singular or non-finite matrix at frame " + std::to_string(t) +
+                               " (corrupted transforms?)");
+      }
+    }
+  }
+  return motion;
 }
 
 StatusOr<std::shared_ptr<const Asset>> LoadAsset(std::vector<SourceFile> files,

@@ -81,8 +81,9 @@ class Asset {
   // rotations spherically; times outside the keys hold the first or last key, and a node
   // without keys keeps its rest transform. Errors: NotFound (no animation, or no
   // animation of that name: the message lists the available ones), InvalidArgument
-  // (fps negative, not finite or above 1000, or a result of more than 1e6 frames or 1e7
-  // joint matrices).
+  // (fps negative, not finite or above 1000, a result of more than 1e6 frames or 1e7
+  // joint matrices, or a joint matrix that is singular or not finite), so that a
+  // returned motion always passes core::ValidateMotion.
   StatusOr<core::Motion> SampleAnimation(std::string_view name, double fps) const;
 
   struct Impl;

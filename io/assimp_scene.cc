@@ -375,6 +375,8 @@ StatusOr<Scene> ImportScene(const std::string& name, const std::string& bytes, F
     importer.SetPropertyBool(AI_CONFIG_IMPORT_FBX_READ_TEXTURES, false);
     importer.SetPropertyBool(AI_CONFIG_IMPORT_FBX_READ_CAMERAS, false);
     importer.SetPropertyBool(AI_CONFIG_IMPORT_FBX_READ_LIGHTS, false);
+    // The SMD reader would look for "<file>/<name>_animation.txt", a path we refuse.
+    importer.SetPropertyBool(AI_CONFIG_IMPORT_SMD_LOAD_ANIMATION_LIST, false);
     importer.SetPropertyInteger(AI_CONFIG_PP_SBP_REMOVE,
                                 aiPrimitiveType_POINT | aiPrimitiveType_LINE);
     const unsigned flags = aiProcess_ValidateDataStructure | aiProcess_Triangulate |
@@ -407,9 +409,9 @@ StatusOr<Scene> ImportScene(const std::string& name, const std::string& bytes, F
   } catch (const std::bad_alloc&) {
     return DataLoss(Quote(name) + " asks for more memory than is available (corrupted sizes?)");
   } catch (const std::exception& e) {
-    return DataLoss("Assimp failed on '" + name + "': " + e.what());
+    return DataLoss("Assimp failed on " + Quote(name) + ": " + e.what());
   } catch (...) {
-    return DataLoss("Assimp failed on '" + name + "' with an unknown exception");
+    return DataLoss("Assimp failed on " + Quote(name) + " with an unknown exception");
   }
 }
 

@@ -13,6 +13,7 @@ namespace motionlod::io {
 namespace {
 
 constexpr double kMinScale = 1e-4;
+constexpr double kMinSourceFps = 10;
 constexpr double kMaxDurationSeconds = 24 * 3600;  // a day
 
 // Rate snapping: a whole number within 0.1%, else an NTSC rate within 0.01%.
@@ -94,12 +95,20 @@ SourceRate DeriveSourceRate(std::vector<double> key_ticks, double ticks_per_seco
   }
   if (gaps.empty() || !(ticks_per_second > 0)) {
     rate.fps = fallback_fps;
-    rate.seconds_per_tick = ticks_per_second > 0 ? 1.0 / ticks_per_second : 1.0 / fallback_fps;
+    rate.seconds_per_tick = ticks_per_second > 0 ? 1.0 / ticks_per_second
+                            : fallback_fps > 0   ? 1.0 / fallback_fps
+                                                 : 0.0;
     return rate;
   }
   std::nth_element(gaps.begin(), gaps.begin() + gaps.size() / 2, gaps.end());
   const double median_gap = gaps[gaps.size() / 2];
   const double raw = ticks_per_second / median_gap;
+  if (raw < kMinSourceFps) {
+    // Keys this sparse are hand-set poses, not a sampled clip: no rate to recover.
+    rate.fps = fallback_fps;
+    rate.seconds_per_tick = 1.0 / ticks_per_second;
+    return rate;
+  }
   rate.fps = SnapRate(raw);
   rate.seconds_per_tick = 1.0 / (rate.fps * median_gap);
   return rate;
@@ -154,9 +163,10 @@ StatusOr<std::vector<Clip>> BuildClips(const Scene& scene, const std::vector<cha
     const PendingClip& p = pending[c];
     tps[c] = p.ticks_per_second;
     if (!(tps[c] > 0)) {
-      tps[c] = 25.0;  // Assimp's documented default when a file gives no rate
-      warnings.push_back("animation '" + p.name +
-                         "' gives no tick rate; assumed 25 ticks per second");
+      // The formats' documented defaults: DirectX AnimTicksPerSecond 4800, else Assimp's 25.
+      tps[c] = scene.format == Format::kDirectX ? 4800.0 : 25.0;
+      warnings.push_back("animation " + Quote(p.name) + " gives no tick rate; assumed " +
+                         std::to_string(static_cast<int>(tps[c])) + " ticks per second");
     }
     double first = std::numeric_limits<double>::infinity(), last = -first;
     for (const SceneChannel* ch : p.channels) {

@@ -34,7 +34,9 @@ struct Clip {
 // gives ticks_per_second / spacing frames per second, snapped to a whole number (within
 // 0.1%) or an NTSC rate (within 0.01%); the tick length is then adjusted so that keys
 // fall exactly on frames (BVH frame times such as 0.0083333 s read as 120 fps). With
-// fewer than two distinct times the rate is `fallback_fps`.
+// fewer than two distinct times, or keys sparser than 10 per second (hand-set poses),
+// the rate is `fallback_fps` (BuildClips: the most common rate of the file's other
+// clips, else the tick rate when it is a plausible frame rate, else 30).
 struct SourceRate {
   double fps = 0;
   double seconds_per_tick = 0;

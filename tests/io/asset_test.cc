@@ -325,8 +325,8 @@ TEST(LoadAsset, FixtureSkeletonSkinAndClipAreExact) {
   const AnimationInfo& info = (*asset)->animations()[0];
   EXPECT_EQ(info.name, "Bend");
   EXPECT_DOUBLE_EQ(info.duration_seconds, 1.0);
-  EXPECT_EQ(info.source_fps, 2.0);
-  EXPECT_EQ(info.source_frame_count, 3);
+  EXPECT_EQ(info.source_fps, 30.0);  // keys every 0.5 s are poses, not a rate
+  EXPECT_EQ(info.source_frame_count, 31);
 
   // At 4 fps frame 1 is t = 0.25 s: root at (0.5, 0, 0), child turned 22.5 degrees.
   const core::Motion m = *(*asset)->SampleAnimation("Bend", 4);
@@ -361,6 +361,42 @@ TEST(LoadAsset, FixtureAsGlbAndAsGltfWithBinAgree) {
       LoadAsset({{"fixture.gltf", bin_fixture.json}, {"fixture.bin", bin_fixture.buffer}});
   ASSERT_TRUE(gltf.ok()) << gltf.status().ToString();
   EXPECT_EQ((*glb)->character().skin.positions, (*gltf)->character().skin.positions);
+}
+
+TEST(LoadAsset, ValveSmdWithSkeletonAndAnimationImports) {
+  const std::string smd =
+      "version 1\nnodes\n0 \"root\" -1\n1 \"child\" 0\nend\nskeleton\ntime 0\n0 0 0 0 0 0 0\n"
+      "1 0 1 0 0 0 0\ntime 1\n0 0 0 0 0 0 0\n1 0 1 0 0 0 1.5\nend\ntriangles\nmat\n"
+      "0 0 0 0 0 0 1 0 0\n0 1 0 0 0 0 1 1 0\n1 0 2 0 0 0 1 0 1\nend\n";
+  const auto asset = LoadAsset({{"two.smd", smd}});
+  ASSERT_TRUE(asset.ok()) << asset.status().ToString();
+  EXPECT_EQ((*asset)->character().skeleton.joint_names,
+            (std::vector<std::string>{"root", "child"}));
+  EXPECT_EQ((*asset)->character().skin.positions.size(), 3u);
+  EXPECT_TRUE((*asset)->warnings().empty()) << (*asset)->warnings().front();
+  ASSERT_EQ((*asset)->animations().size(), 1u);
+  const auto built = core::BuildCharacter((*asset)->character());
+  ASSERT_TRUE(built.ok());
+  EXPECT_TRUE(core::ValidateMotion(*(*asset)->SampleAnimation("", 0), **built).ok());
+}
+
+TEST(LoadAsset, DirectXRigidAnimationUsesTheAnimatedFrameAsJoint) {
+  const std::string x =
+      "xof 0303txt 0032\nFrame Root {\n FrameTransformMatrix { 1.0,0.0,0.0,0.0,0.0,1.0,0.0,0.0,"
+      "0.0,0.0,1.0,0.0,0.0,0.0,0.0,1.0;; }\n Frame Child {\n  FrameTransformMatrix { "
+      "1.0,0.0,0.0,0.0,"
+      "0.0,1.0,0.0,0.0,0.0,0.0,1.0,0.0,0.0,1.0,0.0,1.0;; }\n  Mesh {\n   3;\n   0.0;0.0;0.0;,\n"
+      "   1.0;0.0;0.0;,\n   0.0;1.0;0.0;;\n   1;\n   3;0,1,2;;\n  }\n }\n}\n"
+      "AnimationSet Lift {\n Animation {\n  {Child}\n  AnimationKey { 2; 2; 0;3;0.0,1.0,0.0;;, "
+      "4800;3;0.0,2.0,0.0;;; }\n }\n}\n";
+  const auto asset = LoadAsset({{"lift.x", x}});
+  ASSERT_TRUE(asset.ok()) << asset.status().ToString();
+  EXPECT_EQ((*asset)->character().skeleton.joint_names, (std::vector<std::string>{"Child"}));
+  EXPECT_FALSE((*asset)->has_proxy_skin());
+  ASSERT_EQ((*asset)->animations().size(), 1u);
+  EXPECT_DOUBLE_EQ((*asset)->animations()[0].duration_seconds, 1.0);  // 4800 ticks per second
+  const core::Motion m = *(*asset)->SampleAnimation("Lift", 10);
+  EXPECT_TRUE(m.world(5, 0).col(3).isApprox(Vector3d(0, 1.5, 0), 1e-9));
 }
 
 TEST(LoadAsset, RejectsBadOptions) {

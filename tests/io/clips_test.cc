@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 #include <numbers>
 
 namespace motionlod::io {
@@ -46,11 +47,16 @@ TEST(DeriveSourceRate, SingleKeyFallsBack) {
   EXPECT_EQ(DeriveSourceRate({}, 1000, 30).fps, 30.0);
 }
 
+TEST(DeriveSourceRate, SparsePosesHaveNoRate) {
+  EXPECT_EQ(DeriveSourceRate({0, 500, 1000}, 1000, 30).fps, 30.0);
+}
+
 TEST(FrameCount, FloorsWithTolerance) {
   EXPECT_EQ(FrameCount(993.0 / 120.0, 120), 994);
   EXPECT_EQ(FrameCount(993.0 / 120.0, 30), 249);
   EXPECT_EQ(FrameCount(0, 30), 1);
   EXPECT_EQ(FrameCount(80.0 / 24.0, 24), 81);
+  EXPECT_EQ(FrameCount(1e300, 1000), std::numeric_limits<int>::max());
 }
 
 // One node "n" (rest: translation (0, 0, 5)) animated by `animation`.
@@ -179,8 +185,8 @@ TEST(BuildClips, MergesUnnamedSingleChannelAnimationsOfEqualLength) {
   EXPECT_EQ((*clips)[0].info.name, "animation");
   EXPECT_EQ((*clips)[1].info.name, "animation_1");
   EXPECT_DOUBLE_EQ((*clips)[0].info.duration_seconds, 2.0);
-  EXPECT_EQ((*clips)[0].info.source_fps, 1.0);
-  EXPECT_EQ((*clips)[0].info.source_frame_count, 3);
+  EXPECT_EQ((*clips)[0].info.source_fps, 30.0);  // one key per second: poses, no rate
+  EXPECT_EQ((*clips)[0].info.source_frame_count, 61);
   EXPECT_FALSE(warnings.empty());
 }
 
