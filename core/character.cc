@@ -176,28 +176,52 @@ StatusOr<std::shared_ptr<const Character>> BuildCharacter(RawCharacter raw) {
       }
     }
   }
+  // Bounding boxes per joint and per cluster; clusters by recursive median splits.
+  auto box_of = [&](const uint32_t* begin, const uint32_t* end, Vec3d& center, Vec3d& half) {
+    Vec3d lo = Vec3d::Constant(std::numeric_limits<double>::infinity());
+    Vec3d hi = -lo;
+    for (const uint32_t* v = begin; v != end; ++v) {
+      lo = lo.cwiseMin(k.positions[*v].cast<double>());
+      hi = hi.cwiseMax(k.positions[*v].cast<double>());
+    }
+    center = 0.5 * (lo + hi);
+    half = 0.5 * (hi - lo);
+  };
   c->joint_vertex_centers_.resize(n);
-  c->joint_vertex_radii_.assign(n, 0.0);
+  c->joint_vertex_half_extents_.assign(n, Vec3d::Zero());
+  c->joint_cluster_offsets_.assign(1, 0);
+  c->cluster_vertex_offsets_.assign(1, 0);
   for (int j = 0; j < n; ++j) {
     const uint32_t begin = c->joint_vertex_offsets_[j], end = c->joint_vertex_offsets_[j + 1];
     if (begin == end) {
       c->joint_vertex_centers_[j] = s.bind_world[j].col(3);
-      continue;
+    } else {
+      uint32_t* base = c->joint_vertices_.data();
+      box_of(base + begin, base + end, c->joint_vertex_centers_[j], c->joint_vertex_half_extents_[j]);
+      // Depth-first splitting keeps each cluster's vertices contiguous and in order.
+      std::vector<std::pair<uint32_t, uint32_t>> stack{{begin, end}};
+      while (!stack.empty()) {
+        const auto [lo, hi] = stack.back();
+        stack.pop_back();
+        Vec3d center, half;
+        box_of(base + lo, base + hi, center, half);
+        if (hi - lo <= static_cast<uint32_t>(Character::kMaxClusterVertices)) {
+          c->cluster_vertex_offsets_.push_back(hi);
+          c->cluster_centers_.push_back(center);
+          c->cluster_half_extents_.push_back(half);
+          continue;
+        }
+        int axis = 0;
+        half.maxCoeff(&axis);
+        const uint32_t mid = lo + (hi - lo) / 2;
+        std::nth_element(base + lo, base + mid, base + hi, [&](uint32_t x, uint32_t y) {
+          return k.positions[x][axis] < k.positions[y][axis];
+        });
+        stack.push_back({mid, hi});
+        stack.push_back({lo, mid});
+      }
     }
-    Eigen::Vector3d blo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
-    Eigen::Vector3d bhi = -blo;
-    for (uint32_t e = begin; e < end; ++e) {
-      const Vec3d v = k.positions[c->joint_vertices_[e]].cast<double>();
-      blo = blo.cwiseMin(v);
-      bhi = bhi.cwiseMax(v);
-    }
-    const Vec3d center = 0.5 * (blo + bhi);
-    double radius = 0;
-    for (uint32_t e = begin; e < end; ++e) {
-      radius = std::max(radius, (k.positions[c->joint_vertices_[e]].cast<double>() - center).norm());
-    }
-    c->joint_vertex_centers_[j] = center;
-    c->joint_vertex_radii_[j] = radius;
+    c->joint_cluster_offsets_.push_back(static_cast<uint32_t>(c->cluster_centers_.size()));
   }
 
   // h_j = l_j: summed distance from joint j to each leaf of its subtree. A childless

@@ -66,13 +66,23 @@ class Character {
   // Longest side of the bind-pose bounding box of the mesh (length): the "height"
   // that percentages of vertex error refer to.
   double height() const { return height_; }
-  // Vertices with a non-zero weight on joint j, ascending (CSR by joint).
+  // Vertices with a non-zero weight on joint j (CSR by joint), grouped by cluster.
   const std::vector<uint32_t>& joint_vertex_offsets() const { return joint_vertex_offsets_; }
   const std::vector<uint32_t>& joint_vertices() const { return joint_vertices_; }
-  // Bounding sphere (bind pose) of the vertices weighted to joint j; radius 0 and
-  // the joint's bind position when none are.
+  // Each joint's vertices split into spatially compact clusters of at most
+  // kMaxClusterVertices (median splits along the longest axis): joint j's clusters are
+  // [joint_cluster_offsets[j], joint_cluster_offsets[j+1]); cluster c's vertices are
+  // joint_vertices[cluster_vertex_offsets[c] .. cluster_vertex_offsets[c+1]). Their
+  // bind-pose boxes bound how far a joint's error can move its vertices.
+  static constexpr int kMaxClusterVertices = 32;
+  const std::vector<uint32_t>& joint_cluster_offsets() const { return joint_cluster_offsets_; }
+  const std::vector<uint32_t>& cluster_vertex_offsets() const { return cluster_vertex_offsets_; }
+  const std::vector<Vec3d>& cluster_centers() const { return cluster_centers_; }
+  const std::vector<Vec3d>& cluster_half_extents() const { return cluster_half_extents_; }
+  // Axis-aligned bounding box (bind pose) of the vertices weighted to joint j, as center
+  // and half extents; the joint's bind position and zero extents when none are.
   const std::vector<Vec3d>& joint_vertex_centers() const { return joint_vertex_centers_; }
-  const std::vector<double>& joint_vertex_radii() const { return joint_vertex_radii_; }
+  const std::vector<Vec3d>& joint_vertex_half_extents() const { return joint_vertex_half_extents_; }
   // Direct children of each joint.
   const std::vector<std::vector<int>>& children() const { return children_; }
   int FindJoint(const std::string& name) const;  // -1 when absent
@@ -90,7 +100,11 @@ class Character {
   std::vector<uint32_t> joint_vertex_offsets_;
   std::vector<uint32_t> joint_vertices_;
   std::vector<Vec3d> joint_vertex_centers_;
-  std::vector<double> joint_vertex_radii_;
+  std::vector<Vec3d> joint_vertex_half_extents_;
+  std::vector<uint32_t> joint_cluster_offsets_;
+  std::vector<uint32_t> cluster_vertex_offsets_;
+  std::vector<Vec3d> cluster_centers_;
+  std::vector<Vec3d> cluster_half_extents_;
   std::vector<std::vector<int>> children_;
 };
 

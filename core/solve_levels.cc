@@ -268,6 +268,13 @@ void PreparedMotion::Impl::EvaluateErrors(const MatrixXd& delta, const std::vect
   out.ep_joint.assign(frames, 0.0);
   out.en_vertex.assign(frames, 0.0);
   out.en_joint.assign(frames, 0.0);
+  out.max_vertex_frame = out.max_vertex_index = out.max_e_frame = 0;
+  if (delta.isZero(0.0)) {
+    // The full skeleton (or a baseline that removes nothing): every error is exactly 0.
+    out.mean_e = out.max_e = out.max_vertex_error_pct = out.rms_vertex_error_pct = 0;
+    out.mean_vertex_error_pct = out.mean_normal_error_deg = 0;
+    return;
+  }
   const int rows = static_cast<int>(delta.rows());
   for (int t = 0; t < frames; ++t) {
     // sum_kl tr(Delta_k^T C_kl Delta_l) over the pairs; frame t's 4n x 3 block is contiguous.
@@ -303,23 +310,28 @@ void PreparedMotion::Impl::EvaluateErrors(const MatrixXd& delta, const std::vect
 
 void PreparedMotion::Impl::MaxVertexError(const MatrixXd& delta, LevelErrors& out) const {
   // Exact maximum of |d_i(t)|, d_i(t) = sum_k w_ik Delta_k(t) [v0_i; 1], over all vertices
-  // and frames without evaluating most of them: |d_i| <= max over i's joints of
-  // U_k(t) = |Delta_k [c_k;1]| + |Delta_k(3x3)|_F r_k, with (c_k, r_k) the bounding sphere
-  // of joint k's vertices. Frames and joints are visited by decreasing bound and only
-  // vertices whose bound beats the best exact value so far are evaluated.
+  // and frames without evaluating most of them. For a box with center c and half extents
+  // h in the bind pose, every vertex v in it has
+  //   |Delta_k [v;1]| <= U(t) = |Delta_k [c;1]| + sum_a |Delta_k(3x3) e_a| h_a,
+  // and |d_i| is at most the largest such bound over i's joints (weights sum to 1).
+  // Frames are visited by decreasing bound, then joints, then each joint's clusters, and
+  // only vertices whose bound beats the best exact value so far are evaluated.
   const Character& c = *character;
   const RawSkin& skin = c.skin();
-  const auto& centers = c.joint_vertex_centers();
-  const auto& radii = c.joint_vertex_radii();
   const auto& joint_offsets = c.joint_vertex_offsets();
   const auto& joint_vertices = c.joint_vertices();
+  const auto& joint_clusters = c.joint_cluster_offsets();
+  const auto& cluster_offsets = c.cluster_vertex_offsets();
+  auto box_bound = [](const Affine34d& dk, const Vec3d& center, const Vec3d& half) {
+    return TransformPoint(dk, center).norm() + dk.leftCols<3>().colwise().norm().dot(half);
+  };
   std::vector<double> bound(static_cast<size_t>(frames) * n, 0.0);
   std::vector<double> frame_bound(frames, 0.0);
   for (int t = 0; t < frames; ++t) {
     for (int k = 0; k < n; ++k) {
       if (joint_offsets[k] == joint_offsets[k + 1]) continue;
-      const Affine34d dk = DeltaAt(delta, k, t);
-      const double u = TransformPoint(dk, centers[k]).norm() + dk.leftCols<3>().norm() * radii[k];
+      const double u = box_bound(DeltaAt(delta, k, t), c.joint_vertex_centers()[k],
+                                 c.joint_vertex_half_extents()[k]);
       bound[static_cast<size_t>(t) * n + k] = u;
       frame_bound[t] = std::max(frame_bound[t], u);
     }
@@ -337,20 +349,25 @@ void PreparedMotion::Impl::MaxVertexError(const MatrixXd& delta, LevelErrors& ou
     for (int k = 0; k < n; ++k) frame_delta[k] = DeltaAt(delta, k, t);
     for (int k = 0; k < n; ++k) {
       if (bound[static_cast<size_t>(t) * n + k] <= best) continue;
-      for (uint32_t e = joint_offsets[k]; e < joint_offsets[k + 1]; ++e) {
-        const uint32_t i = joint_vertices[e];
-        if (stamp[i] == t) continue;
-        stamp[i] = t;
-        Vec3d d = Vec3d::Zero();
-        const Vec3d v0 = skin.positions[i].cast<double>();
-        for (uint32_t g = skin.influence_offsets[i]; g < skin.influence_offsets[i + 1]; ++g) {
-          d += skin.influence_weights[g] * TransformPoint(frame_delta[skin.influence_joints[g]], v0);
+      for (uint32_t cluster = joint_clusters[k]; cluster < joint_clusters[k + 1]; ++cluster) {
+        if (box_bound(frame_delta[k], c.cluster_centers()[cluster],
+                      c.cluster_half_extents()[cluster]) <= best) {
+          continue;
         }
-        const double length = d.norm();
-        if (length > best) {
-          best = length;
-          best_frame = t;
-          best_vertex = static_cast<int>(i);
+        for (uint32_t e = cluster_offsets[cluster]; e < cluster_offsets[cluster + 1]; ++e) {
+          const uint32_t i = joint_vertices[e];
+          if (stamp[i] == t) continue;
+          stamp[i] = t;
+          Affine34d blended = Affine34d::Zero();
+          for (uint32_t g = skin.influence_offsets[i]; g < skin.influence_offsets[i + 1]; ++g) {
+            blended.noalias() += skin.influence_weights[g] * frame_delta[skin.influence_joints[g]];
+          }
+          const double length = TransformPoint(blended, Vec3d(skin.positions[i].cast<double>())).norm();
+          if (length > best) {
+            best = length;
+            best_frame = t;
+            best_vertex = static_cast<int>(i);
+          }
         }
       }
     }
@@ -477,7 +494,7 @@ StatusOr<Eigen::MatrixXd> PreparedMotion::SolveLeastSquares(const ReducedSkeleto
   return std::move(system->x);
 }
 
-StatusOr<LevelResult> PreparedMotion::SolveLevel(const ReducedSkeleton& level) const {
+StatusOr<LevelResult> PreparedMotion::SolveLevel(const ReducedSkeleton& level, Detail detail) const {
   const Impl& d = *impl_;
   auto system = SolveSystem(d, level);
   if (!system.ok()) return system.status();
@@ -526,6 +543,10 @@ StatusOr<LevelResult> PreparedMotion::SolveLevel(const ReducedSkeleton& level) c
   MatrixXd delta(4 * n, cols);
   for (int k = 0; k < n; ++k) {
     delta.middleRows(4 * k, 4) = x.middleRows(4 * phi[k], 4) - d.kt.middleRows(4 * k, 4);
+  }
+  if (detail == Detail::kMaxVertexError) {
+    d.MaxVertexError(delta, result.optimized);
+    return result;
   }
   d.EvaluateErrors(delta, level.kept_joints, result.optimized);
   for (int k = 0; k < n; ++k) {

@@ -77,7 +77,7 @@ struct SolveSettings {
   // The sampled figures (mean vertex error, mean normal angle) use up to this many evenly
   // spaced frames and vertices; the maximum vertex error is exact over every frame.
   int sample_frames = 8;
-  int sample_vertices = 1024;
+  int sample_vertices = 512;
 
   Status Validate() const;
   uint64_t Hash() const;  // feeds cache keys together with kAlgorithmVersion
@@ -124,8 +124,15 @@ class PreparedMotion {
   // K_j(t)^T stacked: 4n x 3T, block (4j, 3t) = K_j(t)^T.
   const Eigen::MatrixXd& original_matrices() const;
 
+  // How much of LevelErrors a solve fills in.
+  enum class Detail {
+    kFull,            // every figure, optimised and baseline
+    kMaxVertexError,  // only optimized.max_vertex_error_pct and its frame and vertex:
+                      // enough to steer a search over levels at a third of the cost
+  };
+
   // Solves one level. Allocates per level, never per frame.
-  StatusOr<LevelResult> SolveLevel(const ReducedSkeleton& level) const;
+  StatusOr<LevelResult> SolveLevel(const ReducedSkeleton& level, Detail detail = Detail::kFull) const;
 
   // The unconstrained least-squares solution in double precision, before any polar
   // projection: 4m x 3T, block (4s, 3t) = K'_s(t)^T. What SolveLevel starts from.
