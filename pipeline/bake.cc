@@ -33,7 +33,8 @@ Status CancelledStatus() { return Status(StatusCode::kNotFound, "the bake was ca
 Status SolveCounts(const core::PreparedMotion& prepared, const core::JointRanking& ranking,
                    const std::vector<int>& counts, int threads,
                    std::map<int, core::LevelResult>& out,
-                   const std::function<void(int)>& on_done, const std::atomic<bool>* cancel) {
+                   const std::function<void(int)>& on_done, const std::atomic<bool>* cancel,
+                   core::PreparedMotion::Detail detail = core::PreparedMotion::Detail::kFull) {
   std::vector<std::optional<core::LevelResult>> results(counts.size());
   std::vector<Status> errors(counts.size());
   ParallelFor(
@@ -45,7 +46,7 @@ Status SolveCounts(const core::PreparedMotion& prepared, const core::JointRankin
           errors[index] = level.status();
           return;
         }
-        auto result = prepared.SolveLevel(*level);
+        auto result = prepared.SolveLevel(*level, detail);
         if (!result.ok()) {
           errors[index] = result.status();
           return;
@@ -228,7 +229,9 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
     int lo = minimum, hi = n;
     while (lo < hi) {
       const int mid = lo + (hi - lo) / 2;
-      if (Status status = SolveCounts(**probe, *ranking, {mid}, 1, probed, {}, cancel); !status.ok()) {
+      if (Status status = SolveCounts(**probe, *ranking, {mid}, 1, probed, {}, cancel,
+                                      core::PreparedMotion::Detail::kMaxVertexError);
+          !status.ok()) {
         return status;
       }
       if (probed.at(mid).optimized.max_vertex_error_pct <= bound) {
