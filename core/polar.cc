@@ -22,15 +22,23 @@ Eigen::Matrix3d NearestRotation(const Eigen::Matrix3d& a) {
   // Newton needs det > 0 (it converges to the orthogonal factor, which is a reflection
   // when det < 0) and a condition number it can recover from in a few steps.
   if (!(det > 1e-6 * norm * norm * norm)) return NearestRotationSvd(a);
-  Eigen::Matrix3d x = a;
-  for (int iteration = 0; iteration < 20; ++iteration) {
-    const Eigen::Matrix3d inverse = x.inverse();
-    // Frobenius scaling (Higham): zeta = sqrt(|X^-1| / |X|) speeds the first steps.
-    const double zeta = std::sqrt(inverse.norm() / x.norm());
-    const Eigen::Matrix3d next = 0.5 * (zeta * x + inverse.transpose() / zeta);
-    const double change = (next - x).squaredNorm();
-    x = next;
-    if (change < 1e-28) break;
+  // Start from unit determinant: the polar factor is scale invariant and both iterations
+  // below converge fastest near the orthonormal set.
+  Eigen::Matrix3d x = a / std::cbrt(det);
+  for (int iteration = 0; iteration < 30; ++iteration) {
+    const Eigen::Matrix3d gram = x.transpose() * x;
+    const double error = (gram - Eigen::Matrix3d::Identity()).norm();
+    if (error < 1e-13) break;
+    if (error < 0.5) {
+      // Newton-Schulz, X (3I - X^T X) / 2: no inverse, quadratic convergence near the
+      // orthonormal set, where the solved K' of a level almost always is.
+      x = x * (1.5 * Eigen::Matrix3d::Identity() - 0.5 * gram);
+    } else {
+      // Scaled Newton (Higham): zeta = sqrt(|X^-1| / |X|) speeds the first steps.
+      const Eigen::Matrix3d inverse = x.inverse();
+      const double zeta = std::sqrt(inverse.norm() / x.norm());
+      x = 0.5 * (zeta * x + inverse.transpose() / zeta);
+    }
   }
   return x;
 }

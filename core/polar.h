@@ -6,9 +6,10 @@
 
 namespace motionlod::core {
 
-// Scaled Newton iteration (Higham 1986) on well-conditioned A with det(A) > 0, which
-// converges quadratically in 5 to 8 cheap 3x3 inverses; SVD with a reflection guard
-// otherwise (det(A) <= 0 or nearly singular A). Returns the identity for A = 0.
+// For well-conditioned A with det(A) > 0: scaled Newton steps (Higham 1986) while far from
+// orthonormal, then inverse-free Newton-Schulz steps; both converge quadratically, and a
+// near-rotation needs two or three 3x3 products. SVD with a reflection guard otherwise
+// (det(A) <= 0 or nearly singular A). Returns the identity for A = 0.
 Eigen::Matrix3d NearestRotation(const Eigen::Matrix3d& a);
 
 // The SVD path alone: R = U diag(1, 1, det(U V^T)) V^T. The reference for tests.
