@@ -348,9 +348,15 @@ void PreparedMotion::Impl::MaxVertexError(const MatrixXd& delta, LevelErrors& ou
   const double negligible = kNegligible * c.height();
   std::vector<int> stamp(c.vertex_count(), -1);
   std::vector<Affine34d> frame_delta(n);
+  // The exact evaluations blend in float (the skin's own precision): twice the throughput,
+  // and the figure is a display quantity.
+  std::vector<Affine34f> frame_delta_f(n);
   for (int t : order) {
     if (frame_bound[t] <= std::max(best, negligible)) break;
-    for (int k = 0; k < n; ++k) frame_delta[k] = DeltaAt(delta, k, t);
+    for (int k = 0; k < n; ++k) {
+      frame_delta[k] = DeltaAt(delta, k, t);
+      frame_delta_f[k] = frame_delta[k].cast<float>();
+    }
     for (int k = 0; k < n; ++k) {
       if (bound[static_cast<size_t>(t) * n + k] <= std::max(best, negligible)) continue;
       for (uint32_t cluster = joint_clusters[k]; cluster < joint_clusters[k + 1]; ++cluster) {
@@ -362,11 +368,11 @@ void PreparedMotion::Impl::MaxVertexError(const MatrixXd& delta, LevelErrors& ou
           const uint32_t i = joint_vertices[e];
           if (stamp[i] == t) continue;
           stamp[i] = t;
-          Affine34d blended = Affine34d::Zero();
+          Affine34f blended = Affine34f::Zero();
           for (uint32_t g = skin.influence_offsets[i]; g < skin.influence_offsets[i + 1]; ++g) {
-            blended.noalias() += skin.influence_weights[g] * frame_delta[skin.influence_joints[g]];
+            blended.noalias() += skin.influence_weights[g] * frame_delta_f[skin.influence_joints[g]];
           }
-          const double length = TransformPoint(blended, Vec3d(skin.positions[i].cast<double>())).norm();
+          const double length = TransformPoint(blended, skin.positions[i]).norm();
           if (length > best) {
             best = length;
             best_frame = t;
