@@ -255,6 +255,35 @@ StatusOr<std::shared_ptr<const Character>> BuildCharacter(RawCharacter raw) {
       c->subtree_lengths_[j] += (leaf_point[q] - Vec3d(s.bind_world[j].col(3))).norm();
     }
   }
+  // Pair moments, accumulated per (k <= l) block of an n x n table, then listed.
+  {
+    double total = 0;
+    for (double a : c->vertex_areas_) total += a;
+    std::vector<int> slot(static_cast<size_t>(n) * n, -1);
+    auto& moments = c->joint_pair_moments_;
+    for (int i = 0; i < p; ++i) {
+      const double a = c->vertex_areas_[i] / total;
+      Eigen::Vector4d vh;
+      vh << k.positions[i].cast<double>(), 1.0;
+      const Vec3d normal = k.normals[i].cast<double>();
+      const Eigen::Matrix4d vv = vh * vh.transpose();
+      const Eigen::Matrix3d nn = normal * normal.transpose();
+      for (uint32_t e = k.influence_offsets[i]; e < k.influence_offsets[i + 1]; ++e) {
+        for (uint32_t g = e; g < k.influence_offsets[i + 1]; ++g) {
+          const int lo = std::min(k.influence_joints[e], k.influence_joints[g]);
+          const int hi = std::max(k.influence_joints[e], k.influence_joints[g]);
+          int& index = slot[static_cast<size_t>(lo) * n + hi];
+          if (index < 0) {
+            index = static_cast<int>(moments.size());
+            moments.push_back({lo, hi, Eigen::Matrix4d::Zero(), Eigen::Matrix3d::Zero()});
+          }
+          const double w = a * k.influence_weights[e] * k.influence_weights[g];
+          moments[index].position_moment += w * vv;
+          moments[index].normal_moment += w * nn;
+        }
+      }
+    }
+  }
   return std::shared_ptr<const Character>(std::move(c));
 }
 

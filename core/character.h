@@ -87,6 +87,18 @@ class Character {
   const std::vector<std::vector<int>>& children() const { return children_; }
   int FindJoint(const std::string& name) const;  // -1 when absent
 
+  // Second moments of the skin per pair of joints k <= l that share a vertex, weighted by
+  // the area fractions a_i = A_i / sum A (what eq. 3 sums over vertices, factored so
+  // that no solve or error evaluation ever loops over the mesh again):
+  //   position_moment = sum_i a_i w_ik w_il [v0_i;1][v0_i;1]^T   (4x4, length^2)
+  //   normal_moment   = sum_i a_i w_ik w_il n0_i n0_i^T           (3x3)
+  struct JointPairMoment {
+    int k = 0, l = 0;
+    Eigen::Matrix4d position_moment;
+    Eigen::Matrix3d normal_moment;
+  };
+  const std::vector<JointPairMoment>& joint_pair_moments() const { return joint_pair_moments_; }
+
  private:
   friend StatusOr<std::shared_ptr<const Character>> BuildCharacter(RawCharacter raw);
   Character() = default;
@@ -106,6 +118,7 @@ class Character {
   std::vector<Vec3d> cluster_centers_;
   std::vector<Vec3d> cluster_half_extents_;
   std::vector<std::vector<int>> children_;
+  std::vector<JointPairMoment> joint_pair_moments_;
 };
 
 StatusOr<std::shared_ptr<const Character>> BuildCharacter(RawCharacter raw);

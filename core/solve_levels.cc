@@ -83,7 +83,10 @@ struct PreparedMotion::Impl {
   std::vector<Vec3d> sample_normals;  // |frames| x |vertices|: blended original normals
   double sample_area = 0;
 
+  // Every figure of LevelErrors.
   void EvaluateErrors(const MatrixXd& delta, const std::vector<int>& kept, LevelErrors& out) const;
+  // Only the per-frame E and its parts, their means and maxima, and the RMS vertex error.
+  void QuadraticErrors(const MatrixXd& delta, const std::vector<int>& kept, LevelErrors& out) const;
   void MaxVertexError(const MatrixXd& delta, LevelErrors& out) const;
   void SampledErrors(const MatrixXd& delta, LevelErrors& out) const;
 };
@@ -93,25 +96,6 @@ namespace {
 // Delta_k(t) as a 3x4 matrix from the stacked transposes.
 inline Affine34d DeltaAt(const MatrixXd& delta, int k, int t) {
   return delta.block<4, 3>(4 * k, 3 * t).transpose();
-}
-
-SparseMatrixd BlocksToSparse(int n, const std::vector<Eigen::Matrix4d>& blocks,
-                             const std::vector<char>& used) {
-  std::vector<Eigen::Triplet<double>> triplets;
-  for (int k = 0; k < n; ++k) {
-    for (int l = 0; l < n; ++l) {
-      if (!used[k * n + l]) continue;
-      const Eigen::Matrix4d& b = blocks[k * n + l];
-      for (int r = 0; r < 4; ++r) {
-        for (int c = 0; c < 4; ++c) {
-          if (b(r, c) != 0) triplets.emplace_back(4 * k + r, 4 * l + c, b(r, c));
-        }
-      }
-    }
-  }
-  SparseMatrixd m(4 * n, 4 * n);
-  m.setFromTriplets(triplets.begin(), triplets.end());
-  return m;
 }
 
 std::vector<int> EvenlySpaced(int count, int available) {
@@ -162,41 +146,33 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
     for (int k = 0; k < n; ++k) d.kt.block<4, 3>(4 * k, 3 * t) = skinning[static_cast<size_t>(t) * n + k].transpose();
   }
 
-  // Pair moments Cp_kl, Cn_kl over vertices, weighted by area fractions a_i.
-  const std::vector<double>& areas = c.vertex_areas();
-  const double total_area = std::accumulate(areas.begin(), areas.end(), 0.0);
-  std::vector<Eigen::Matrix4d> cp_blocks(static_cast<size_t>(n) * n, Eigen::Matrix4d::Zero());
-  std::vector<Eigen::Matrix4d> cn_blocks(static_cast<size_t>(n) * n, Eigen::Matrix4d::Zero());
-  std::vector<char> used(static_cast<size_t>(n) * n, 0);
-  for (int i = 0; i < p; ++i) {
-    const double a = areas[i] / total_area;
-    Eigen::Vector4d vh;
-    vh << skin.positions[i].cast<double>(), 1.0;
-    Eigen::Vector4d nh;
-    nh << skin.normals[i].cast<double>(), 0.0;
-    const Eigen::Matrix4d vv = vh * vh.transpose();
-    const Eigen::Matrix4d nn = nh * nh.transpose();
-    for (uint32_t e = skin.influence_offsets[i]; e < skin.influence_offsets[i + 1]; ++e) {
-      for (uint32_t g = skin.influence_offsets[i]; g < skin.influence_offsets[i + 1]; ++g) {
-        const size_t block = static_cast<size_t>(skin.influence_joints[e]) * n + skin.influence_joints[g];
-        const double w = a * skin.influence_weights[e] * skin.influence_weights[g];
-        cp_blocks[block] += w * vv;
-        cn_blocks[block] += w * nn;
-        used[block] = 1;
+  // The character's pair moments as sparse 4n x 4n matrices (both triangles) for the
+  // right-hand sides, and as a list with off-diagonal pairs doubled for the error forms.
+  {
+    std::vector<Eigen::Triplet<double>> cp_triplets, cn_triplets;
+    for (const Character::JointPairMoment& moment : c.joint_pair_moments()) {
+      for (int r = 0; r < 4; ++r) {
+        for (int q = 0; q < 4; ++q) {
+          const double vp = moment.position_moment(r, q);
+          const double vn = r < 3 && q < 3 ? moment.normal_moment(r, q) : 0.0;
+          cp_triplets.emplace_back(4 * moment.k + r, 4 * moment.l + q, vp);
+          if (vn != 0) cn_triplets.emplace_back(4 * moment.k + r, 4 * moment.l + q, vn);
+          if (moment.k != moment.l) {
+            cp_triplets.emplace_back(4 * moment.l + q, 4 * moment.k + r, vp);
+            if (vn != 0) cn_triplets.emplace_back(4 * moment.l + q, 4 * moment.k + r, vn);
+          }
+        }
       }
-    }
-  }
-  d.cp = BlocksToSparse(n, cp_blocks, used);
-  d.cn = BlocksToSparse(n, cn_blocks, used);
-  for (int k = 0; k < n; ++k) {
-    for (int l = k; l < n; ++l) {
-      if (!used[static_cast<size_t>(k) * n + l]) continue;
       // Off-diagonal pairs appear twice in the trace sum: fold the factor 2 in here.
-      const double factor = k == l ? 1.0 : 2.0;
-      d.pairs.emplace_back(k, l);
-      d.pair_cp.push_back(factor * cp_blocks[static_cast<size_t>(k) * n + l]);
-      d.pair_cn.push_back(factor * cn_blocks[static_cast<size_t>(k) * n + l].topLeftCorner<3, 3>());
+      const double factor = moment.k == moment.l ? 1.0 : 2.0;
+      d.pairs.emplace_back(moment.k, moment.l);
+      d.pair_cp.push_back(factor * moment.position_moment);
+      d.pair_cn.push_back(factor * moment.normal_moment);
     }
+    d.cp.resize(4 * n, 4 * n);
+    d.cp.setFromTriplets(cp_triplets.begin(), cp_triplets.end());
+    d.cn.resize(4 * n, 4 * n);
+    d.cn.setFromTriplets(cn_triplets.begin(), cn_triplets.end());
   }
 
   const std::vector<double>& lengths = c.subtree_lengths();
@@ -217,7 +193,7 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
     for (int k = 0; k < n; ++k) delta.middleRows(4 * k, 4) = d.kt.middleRows(0, 4) - d.kt.middleRows(4 * k, 4);
     d.alpha = d.beta = 1.0;
     LevelErrors root_only;
-    d.EvaluateErrors(delta, {0}, root_only);
+    d.QuadraticErrors(delta, {0}, root_only);
     double max_ep = 0, max_en = 0;
     for (int t = 0; t < frames; ++t) {
       max_ep = std::max(max_ep, root_only.ep_vertex[t] + root_only.ep_joint[t]);
@@ -242,7 +218,7 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
   const int stride = (p + settings.sample_vertices - 1) / settings.sample_vertices;
   for (int i = 0; i < p; i += stride) {
     d.sample_vertices.push_back(i);
-    d.sample_area += areas[i];
+    d.sample_area += c.vertex_areas()[i];
   }
   d.sample_normals.resize(d.sample_frames.size() * d.sample_vertices.size());
   for (size_t q = 0; q < d.sample_frames.size(); ++q) {
@@ -263,18 +239,24 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
 
 void PreparedMotion::Impl::EvaluateErrors(const MatrixXd& delta, const std::vector<int>& kept,
                                           LevelErrors& out) const {
+  QuadraticErrors(delta, kept, out);
+  if (delta.isZero(0.0)) {
+    // The full skeleton (or a baseline that removes nothing): every figure is exactly 0.
+    out.max_vertex_error_pct = out.mean_vertex_error_pct = out.mean_normal_error_deg = 0;
+    out.max_vertex_frame = out.max_vertex_index = 0;
+    return;
+  }
+  MaxVertexError(delta, out);
+  SampledErrors(delta, out);
+}
+
+void PreparedMotion::Impl::QuadraticErrors(const MatrixXd& delta, const std::vector<int>& kept,
+                                           LevelErrors& out) const {
   out.e.assign(frames, 0.0);
   out.ep_vertex.assign(frames, 0.0);
   out.ep_joint.assign(frames, 0.0);
   out.en_vertex.assign(frames, 0.0);
   out.en_joint.assign(frames, 0.0);
-  out.max_vertex_frame = out.max_vertex_index = out.max_e_frame = 0;
-  if (delta.isZero(0.0)) {
-    // The full skeleton (or a baseline that removes nothing): every error is exactly 0.
-    out.mean_e = out.max_e = out.max_vertex_error_pct = out.rms_vertex_error_pct = 0;
-    out.mean_vertex_error_pct = out.mean_normal_error_deg = 0;
-    return;
-  }
   const int rows = static_cast<int>(delta.rows());
   for (int t = 0; t < frames; ++t) {
     // sum_kl tr(Delta_k^T C_kl Delta_l) over the pairs; frame t's 4n x 3 block is contiguous.
@@ -304,8 +286,6 @@ void PreparedMotion::Impl::EvaluateErrors(const MatrixXd& delta, const std::vect
   out.max_e_frame = static_cast<int>(max_it - out.e.begin());
   const double mean_sq = std::accumulate(out.ep_vertex.begin(), out.ep_vertex.end(), 0.0) / frames;
   out.rms_vertex_error_pct = 100.0 * std::sqrt(mean_sq) / character->height();
-  MaxVertexError(delta, out);
-  SampledErrors(delta, out);
 }
 
 void PreparedMotion::Impl::MaxVertexError(const MatrixXd& delta, LevelErrors& out) const {
