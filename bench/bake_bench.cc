@@ -6,7 +6,9 @@
 //   bake/<case>/<variant>/default/threads:N   pipeline::Bake with the default ladder on N
 //                                          threads, timed by the report's
 //                                          timing.bake_seconds (import excluded, the report's
-//                                          own skinning pass excluded)
+//                                          own skinning pass excluded); counters: the report's
+//                                          paired ratio and the stages between Bake's
+//                                          progress reports
 //   bake/<case>/<variant>/all/threads:N    pipeline::Bake with every level (all_levels) on
 //                                          the characters that are also subdivided
 //   replica/<case>/vpno+pd/all/threads:N   BakeEveryLevel (below) on the same original
@@ -34,7 +36,7 @@
 //   --min_vertices=N    subdivision target (default 10000)
 //   --naive_frames=K    frames the naive solve runs per iteration (default 4)
 //   --breakdown         no benchmarks: prints where the bake time goes, stage by stage
-//   --per_level         with --breakdown: each level's SolveLeastSquares and SolveLevel time
+//   --per_level         with --breakdown: each level's LS / errors / polar time
 //   --only=TEXT         with --breakdown: only the cases whose label contains TEXT
 #include <benchmark/benchmark.h>
 
@@ -225,8 +227,7 @@ struct Stages {
 // character and sample the motion (PrepareInputs), rank, prepare, solve every count from
 // n down to the locked minimum on `threads` threads, encode. It exists because
 // BakeRequest takes an io::Asset, which cannot be made from a subdivided RawCharacter.
-// The report (JSON) is not built; Bake excludes it from bake_seconds only partly (it is
-// built after), so nothing is lost.
+// Like Bake's timing.bake_seconds, it leaves out the report (built after the timed part).
 StatusOr<Stages> BakeEveryLevel(const core::RawCharacter& raw, const io::Asset& motion_source,
                                 const std::string& animation, core::Variant variant,
                                 int threads) {

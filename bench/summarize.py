@@ -160,7 +160,7 @@ def ladder_stages_table(runs, bakes, threads, lines):
     cases = bakes.get(threads, {}).get("default", {})
     rows = []
     for case in sorted(cases, key=str.lower):
-        for v in VARIANTS:
+        for v in ("vp", "vpno+pd"):  # the cheapest and the default variant
             name = cases[case].get(v)
             if not name or counter(runs, name, "to_first_level_s") is None:
                 continue
@@ -260,8 +260,11 @@ def machine(context, command):
     except OSError:
         pass
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    commit = run(["git", "-C", root, "rev-parse", "--short", "HEAD"]) or "unknown"
-    dirty = run(["git", "-C", root, "status", "--porcelain", "--untracked-files=no"])
+    if context.get("git"):  # recorded by scripts/bench.sh when the run started
+        commit, dirty = context["git"], ""
+    else:
+        commit = run(["git", "-C", root, "rev-parse", "--short", "HEAD"]) or "unknown"
+        dirty = run(["git", "-C", root, "status", "--porcelain", "--untracked-files=no"])
     version = context.get("library_version") or run(
         ["dpkg-query", "-W", "-f=${Version}", "libbenchmark-dev"]) or "?"
     facts = [
