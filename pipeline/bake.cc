@@ -196,57 +196,78 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
   std::sort(counts.begin(), counts.end(), std::greater<>());
   counts.erase(std::unique(counts.begin(), counts.end()), counts.end());
 
+  const bool default_ladder = request.levels.empty() && !request.all_levels;
   std::map<int, core::LevelResult> solved;
   const double solve_begin = 0.1, solve_end = request.variant_curves ? 0.6 : 0.95;
   int solved_count = 0;
   const auto on_level_done = [&](int) {
     ++solved_count;
     report_progress(solve_begin + (solve_end - solve_begin) * solved_count /
-                                      std::max<size_t>(counts.size(), 1),
+                                      std::max<size_t>(counts.size() + (default_ladder ? 1 : 0), 1),
                     "solve");
   };
-  if (request.levels.empty() && !request.all_levels) {
-    // The smallest useful skeleton: bisect the kept count over [minimum, n] on the
-    // optimised maximum vertex error (exact at n). The error grows as joints go, though
-    // not strictly, so this finds a count that meets the bound with the one below failing.
-    // Probes run on at most kProbeFrames evenly strided frames: they only steer the
-    // search, and the chosen level is then solved on every frame with the others.
-    constexpr int kProbeFrames = 64;
-    const int stride = (motion.frame_count + kProbeFrames - 1) / kProbeFrames;
-    core::Motion probe_motion;
-    probe_motion.fps = motion.fps / stride;
-    probe_motion.joint_count = n;
-    for (int t = 0; t < motion.frame_count; t += stride) {
-      probe_motion.joint_world.insert(probe_motion.joint_world.end(),
-                                      motion.joint_world.begin() + static_cast<size_t>(t) * n,
-                                      motion.joint_world.begin() + static_cast<size_t>(t + 1) * n);
-      ++probe_motion.frame_count;
-    }
-    auto probe = core::PreparedMotion::Create(inputs->character, probe_motion, request.settings);
-    if (!probe.ok()) return probe.status();
-    std::map<int, core::LevelResult> probed;
-    const double bound = request.smallest_useful_error_pct;
-    int lo = minimum, hi = n;
-    while (lo < hi) {
-      const int mid = lo + (hi - lo) / 2;
-      if (Status status = SolveCounts(**probe, *ranking, {mid}, 1, probed, {}, cancel,
-                                      core::PreparedMotion::Detail::kMaxVertexError);
-          !status.ok()) {
-        return status;
-      }
-      if (probed.at(mid).optimized.max_vertex_error_pct <= bound) {
-        hi = mid;
-      } else {
-        lo = mid + 1;
-      }
-    }
-    counts.push_back(hi);
-    std::sort(counts.begin(), counts.end(), std::greater<>());
-    counts.erase(std::unique(counts.begin(), counts.end()), counts.end());
-  }
   if (Status status = SolveCounts(**prepared, *ranking, counts, threads, solved, on_level_done, cancel);
       !status.ok()) {
     return status;
+  }
+  if (default_ladder) {
+    // The smallest useful skeleton: the fewest joints whose optimised maximum vertex error
+    // is within the bound. The ladder's exact errors bracket it; bisection narrows the
+    // bracket (the error grows as joints go, though not strictly, so this finds a count
+    // that meets the bound with the one below failing). Probes only steer the search: on a
+    // long motion they run on at most kProbeFrames evenly strided frames and fill in only
+    // the maximum error; the chosen level is then solved in full on every frame.
+    const double bound = request.smallest_useful_error_pct;
+    int lo = minimum, hi = n;
+    for (const auto& [count, result] : solved) {
+      if (result.optimized.max_vertex_error_pct <= bound) {
+        hi = std::min(hi, count);
+      } else {
+        lo = std::max(lo, count + 1);
+      }
+    }
+    lo = std::min(lo, hi);
+    if (lo < hi) {
+      constexpr int kProbeFrames = 64;
+      const int stride = (motion.frame_count + kProbeFrames - 1) / kProbeFrames;
+      std::shared_ptr<const core::PreparedMotion> probe = *prepared;
+      if (stride > 1) {
+        core::Motion probe_motion;
+        probe_motion.fps = motion.fps / stride;
+        probe_motion.joint_count = n;
+        for (int t = 0; t < motion.frame_count; t += stride) {
+          probe_motion.joint_world.insert(probe_motion.joint_world.end(),
+                                          motion.joint_world.begin() + static_cast<size_t>(t) * n,
+                                          motion.joint_world.begin() + static_cast<size_t>(t + 1) * n);
+          ++probe_motion.frame_count;
+        }
+        auto created = core::PreparedMotion::Create(inputs->character, probe_motion, request.settings);
+        if (!created.ok()) return created.status();
+        probe = *created;
+      }
+      std::map<int, core::LevelResult> probed;
+      while (lo < hi) {
+        const int mid = lo + (hi - lo) / 2;
+        if (Status status = SolveCounts(*probe, *ranking, {mid}, 1, probed, {}, cancel,
+                                        core::PreparedMotion::Detail::kMaxVertexError);
+            !status.ok()) {
+          return status;
+        }
+        if (probed.at(mid).optimized.max_vertex_error_pct <= bound) {
+          hi = mid;
+        } else {
+          lo = mid + 1;
+        }
+      }
+    }
+    if (!solved.count(hi)) {
+      counts.push_back(hi);
+      std::sort(counts.begin(), counts.end(), std::greater<>());
+      if (Status status = SolveCounts(**prepared, *ranking, {hi}, 1, solved, on_level_done, cancel);
+          !status.ok()) {
+        return status;
+      }
+    }
   }
 
   // Fig. 7: the four variants at every level, errors only.
