@@ -26,34 +26,25 @@ double SnapRate(double fps) {
   return fps;
 }
 
-template <typename T>
-T Interpolate(const std::vector<double>& times, const std::vector<T>& values, double t);
-
-template <>
-Eigen::Vector3d Interpolate(const std::vector<double>& times,
-                            const std::vector<Eigen::Vector3d>& values, double t) {
-  if (t <= times.front()) return values.front();
-  if (t >= times.back()) return values.back();
-  const size_t hi =
-      static_cast<size_t>(std::upper_bound(times.begin(), times.end(), t) - times.begin());
-  const size_t lo = hi - 1;
-  const double span = times[hi] - times[lo];
-  const double alpha = span > 0 ? (t - times[lo]) / span : 0.0;
-  return (1 - alpha) * values[lo] + alpha * values[hi];
+inline Eigen::Vector3d Blend(const Eigen::Vector3d& a, const Eigen::Vector3d& b, double alpha) {
+  return (1 - alpha) * a + alpha * b;
+}
+inline Eigen::Quaterniond Blend(const Eigen::Quaterniond& a, const Eigen::Quaterniond& b,
+                                double alpha) {
+  return a.slerp(alpha, b).normalized();  // Eigen's slerp takes the shorter arc
 }
 
-template <>
-Eigen::Quaterniond Interpolate(const std::vector<double>& times,
-                               const std::vector<Eigen::Quaterniond>& values, double t) {
+// The keyed value at time t: the first or last key outside the keys, else the two
+// surrounding keys blended (lerp for vectors, slerp for rotations).
+template <typename T>
+T Interpolate(const std::vector<double>& times, const std::vector<T>& values, double t) {
   if (t <= times.front()) return values.front();
   if (t >= times.back()) return values.back();
   const size_t hi =
       static_cast<size_t>(std::upper_bound(times.begin(), times.end(), t) - times.begin());
   const size_t lo = hi - 1;
   const double span = times[hi] - times[lo];
-  const double alpha = span > 0 ? (t - times[lo]) / span : 0.0;
-  // Eigen's slerp takes the shorter arc.
-  return values[lo].slerp(alpha, values[hi]).normalized();
+  return Blend(values[lo], values[hi], span > 0 ? (t - times[lo]) / span : 0.0);
 }
 
 // Sorts keys by time (stable) when a file lists them out of order.
