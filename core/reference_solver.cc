@@ -32,32 +32,25 @@ std::vector<Affine34d> SolveFrameNaive(const PreparedMotion& prepared,
   Eigen::MatrixXd a = Eigen::MatrixXd::Zero(rows, 4 * m);
   Eigen::MatrixXd target = Eigen::MatrixXd::Zero(rows, 3);
   int r = 0;
-  for (int i = 0; i < p; ++i, ++r) {
-    const double weight = std::sqrt(alpha * areas[i] / total_area);
-    Eigen::Vector4d vh;
-    vh << skin.positions[i].cast<double>(), 1.0;
-    Vec3d skinned = Vec3d::Zero();
-    for (uint32_t e = skin.influence_offsets[i]; e < skin.influence_offsets[i + 1]; ++e) {
-      const int j = skin.influence_joints[e];
-      const double w = skin.influence_weights[e];
-      a.block<1, 4>(r, 4 * level.joint_to_slot[j]) += weight * w * vh.transpose();
-      skinned += w * (k[j] * vh);
+  // One row per vertex: its position (w = 1) or normal (w = 0) rows, the targets being the
+  // original skinned values (unnormalised blended normals).
+  auto add_vertex_rows = [&](double scale, const std::vector<Vec3f>& attribute, double w_coord) {
+    for (int i = 0; i < p; ++i, ++r) {
+      const double weight = std::sqrt(scale * areas[i] / total_area);
+      Eigen::Vector4d h;
+      h << attribute[i].cast<double>(), w_coord;
+      Vec3d original = Vec3d::Zero();
+      for (uint32_t e = skin.influence_offsets[i]; e < skin.influence_offsets[i + 1]; ++e) {
+        const int j = skin.influence_joints[e];
+        const double w = skin.influence_weights[e];
+        a.block<1, 4>(r, 4 * level.joint_to_slot[j]) += weight * w * h.transpose();
+        original += w * (k[j] * h);
+      }
+      target.row(r) = weight * original.transpose();
     }
-    target.row(r) = weight * skinned.transpose();
-  }
-  for (int i = 0; i < p; ++i, ++r) {
-    const double weight = std::sqrt(beta * areas[i] / total_area);
-    Eigen::Vector4d nh;
-    nh << skin.normals[i].cast<double>(), 0.0;
-    Vec3d blended = Vec3d::Zero();
-    for (uint32_t e = skin.influence_offsets[i]; e < skin.influence_offsets[i + 1]; ++e) {
-      const int j = skin.influence_joints[e];
-      const double w = skin.influence_weights[e];
-      a.block<1, 4>(r, 4 * level.joint_to_slot[j]) += weight * w * nh.transpose();
-      blended += w * (k[j] * nh);
-    }
-    target.row(r) = weight * blended.transpose();
-  }
+  };
+  add_vertex_rows(alpha, skin.positions, 1.0);
+  add_vertex_rows(beta, skin.normals, 0.0);
   for (int s = 0; s < m; ++s) {
     const int j = level.kept_joints[s];
     const double b = total_length > 0 ? settings.joint_weight * lengths[j] / total_length : 0.0;
