@@ -1,0 +1,171 @@
+// The JSON wire contract of motionlodd (the HTTP daemon) and its future thin client: the
+// bodies of /v1 requests and responses. proto/openapi.yaml describes the same shapes; the
+// daemon serves it at /v1/openapi.yaml. No Eigen, no core: plain data, JSON conversion and
+// the validation of what a client sends.
+//
+// Units: seconds, frames per second, pixels (on-screen character height) and percent of
+// the character's height, as in docs/report.md. Ids are lower-case SHA-256 hex (64
+// characters): content addresses of what they name.
+#pragma once
+
+#include <cstdint>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "base/status.h"
+
+namespace motionlod::proto::api {
+
+// ^[0-9a-f]{64}$: every id of the API (characters, motions, bakes, jobs, levels).
+bool IsContentId(std::string_view text);
+
+// The solver variants a bake accepts (core::VariantName spells the same).
+inline constexpr std::string_view kVariantNames[] = {"vp", "vpno", "vp+pd", "vpno+pd"};
+
+struct FileInfo {
+  std::string name;    // plain file name as uploaded
+  std::string sha256;  // content address of the bytes
+  uint64_t size = 0;   // bytes
+};
+
+// An animation registered for a character: one embedded in the character's file, or one
+// of a separately uploaded motion file, retargeted onto the character.
+struct MotionInfo {
+  std::string id;
+  std::string character;
+  std::string animation;        // the animation's name inside its file
+  std::string source;           // "character" (embedded) or "file" (uploaded to /v1/motions)
+  std::vector<FileInfo> files;  // the motion file's parts ("file" only)
+  double duration_seconds = 0;
+  double source_fps = 0;
+  int frames = 0;                     // at source_fps
+  std::vector<std::string> warnings;  // unmatched joints of a retargeted motion
+};
+
+struct CharacterInfo {
+  std::string id;
+  std::string name;  // the main file's name
+  std::vector<FileInfo> files;
+  int joints = 0;
+  int vertices = 0;
+  int triangles = 0;
+  bool proxy_skin = false;               // no mesh in the file: capsules around the bones
+  std::vector<std::string> joint_names;  // n, parents before children
+  std::vector<MotionInfo> animations;    // embedded animations, registered as motions
+  std::vector<std::string> warnings;     // what the importer fixed or ignored
+  std::string created_at;                // RFC 3339, UTC
+};
+
+// POST /v1/bakes. Defaults match the `motionlod bake` tool.
+struct BakeRequest {
+  std::string character;  // character id
+  // A motion id (of this character), or the name of one of the character's own
+  // animations; empty: the character's first animation.
+  std::string motion;
+  std::vector<int> levels;  // kept joint counts; empty: the default ladder
+  bool all_levels = false;  // every count from all joints down to the locked minimum
+  std::string variant = "vpno+pd";
+  double fps = 0;  // 0: the source's rate; else (0, 1000]
+  std::vector<std::string> locked_joints;
+  bool keep_pd_translation = false;  // rigid variants: keep the solved translation
+};
+
+// Strict parse of a bake request: unknown fields, wrong types, a malformed id, an unknown
+// variant, fps outside [0, 1000], level counts below 1 or above 65535, more than 1024
+// levels or locked joints, and levels together with all_levels are kInvalidArgument with
+// a message naming the field.
+StatusOr<BakeRequest> ParseBakeRequest(std::string_view json_text);
+
+struct JobError {
+  std::string code;    // invalid_argument, not_found, unsupported, data_loss, internal
+  std::string detail;  // the bake's message
+};
+
+// GET /v1/jobs/{id}. A bake has exactly one job, of the same id.
+struct JobStatus {
+  std::string id;
+  std::string bake;
+  std::string state;    // queued | running | succeeded | failed
+  double progress = 0;  // 0..1
+  std::string stage;    // the bake's current stage ("solve", ...)
+  std::optional<JobError> error;
+  int attempts = 0;      // runs started (a run interrupted by a crash or shutdown runs again)
+  uint64_t version = 0;  // grows with every change seen by this daemon process
+  std::string created_at, started_at, finished_at;  // RFC 3339, empty when not yet
+};
+
+// One level of a finished bake (finest first) with the pixel heights it serves.
+struct LevelEntry {
+  int index = 0;
+  int joints = 0;
+  double max_vertex_error_pct = 0;
+  double mean_vertex_error_pct = 0;
+  double mean_normal_error_deg = 0;
+  double mean_e = 0;
+  // Tallest on-screen height (px) within the 1 px budget; nullopt when the level is exact.
+  std::optional<double> max_px_for_1px_error;
+  // With the default 1 px budget the level is chosen for heights in (px_min, px_max];
+  // px_max nullopt: unbounded. `chosen` false: a coarser level serves its whole range.
+  bool chosen = false;
+  double px_min = 0;
+  std::optional<double> px_max;
+  std::string hash;  // /v1/levels/{hash}: the one-level file
+  uint64_t bytes = 0;
+};
+
+// GET /v1/bakes/{id}.
+struct BakeInfo {
+  std::string id;
+  std::string character;
+  std::string motion;  // motion id
+  std::string animation;
+  BakeRequest request;  // as resolved (motion id filled in, lists sorted)
+  std::string state;    // the job's state
+  int frames = 0;
+  double fps = 0;
+  std::string variant;
+  std::string level_set;  // sha256 of the whole level set (empty until succeeded)
+  uint64_t level_set_bytes = 0;
+  std::vector<LevelEntry> levels;  // empty until succeeded
+  std::string created_at;
+};
+
+// GET /v1/bakes/{id}/level?px=&budget= with Accept: application/json.
+struct LevelChoice {
+  std::string bake;
+  double px = 0;
+  double budget_px = 1;
+  int index = 0;
+  int joints = 0;
+  double max_vertex_error_pct = 0;
+  double error_px = 0;  // px * max_vertex_error_pct / 100: the worst deviation on screen
+  bool within_budget = true;
+  std::string hash;
+  std::string url;  // /v1/levels/{hash}
+  uint64_t bytes = 0;
+};
+
+// RFC 9457 problem details (application/problem+json).
+struct Problem {
+  std::string type;  // urn:motionlod:problem:<slug>
+  std::string title;
+  int status = 500;
+  std::string detail;
+  std::string instance;    // the request path
+  std::string request_id;  // also in the X-Request-Id response header
+};
+
+void to_json(nlohmann::json& j, const FileInfo& v);
+void to_json(nlohmann::json& j, const MotionInfo& v);
+void to_json(nlohmann::json& j, const CharacterInfo& v);
+void to_json(nlohmann::json& j, const BakeRequest& v);
+void to_json(nlohmann::json& j, const JobStatus& v);
+void to_json(nlohmann::json& j, const LevelEntry& v);
+void to_json(nlohmann::json& j, const BakeInfo& v);
+void to_json(nlohmann::json& j, const LevelChoice& v);
+void to_json(nlohmann::json& j, const Problem& v);
+
+}  // namespace motionlod::proto::api

@@ -1,0 +1,92 @@
+// motionlodd's settings: defaults, then config/motionlodd.toml (or --config FILE), then
+// MOTIONLODD_* environment variables, then command-line flags, each overriding the one
+// before. Every option is documented in config/motionlodd.toml and docs/SERVER.md.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "base/status.h"
+
+namespace motionlod::server {
+
+struct Config {
+  // Network.
+  std::string bind = "127.0.0.1";
+  int port = 8080;  // 0: any free port (logged, and printed as "listening on http://HOST:PORT")
+  int http_threads = 64;  // connection threads; each open keep-alive connection holds one
+
+  // Storage.
+  std::string data_dir = "motionlodd-data";
+
+  // Jobs.
+  int threads = 0;            // bake workers draining the queue; 0: one per hardware thread
+  int bake_threads = 1;       // threads inside one bake; 0: one per hardware thread
+  int queue_capacity = 64;    // queued jobs beyond which POST /v1/bakes answers 503
+  double drain_seconds = 10;  // on SIGTERM, how long running bakes may finish before
+                              // they are stopped and left queued for the next start
+
+  // Memory.
+  int64_t cache_bytes = int64_t{256} << 20;  // LRU cache of level files
+
+  // Limits.
+  int64_t max_upload_bytes = int64_t{64} << 20;  // decoded body of an upload (413 beyond)
+  int64_t max_json_bytes = int64_t{64} << 10;    // body of a JSON request
+  int max_upload_parts = 32;                     // multipart parts of one upload
+  int max_concurrent_uploads = 8;   // upload bodies being received at once (503 beyond):
+                                    // bounds their memory to this x max_upload_bytes
+  int max_concurrent_imports = 2;   // uploads imported at once (503 beyond)
+  int max_streams = 4;              // open SSE streams and long-polls together (503 beyond)
+  double max_wait_seconds = 30;     // cap of ?wait= on GET /v1/jobs/{id}
+  double max_stream_seconds = 300;  // an SSE stream ends after this (clients reconnect)
+
+  // Timeouts (seconds).
+  int read_timeout_seconds = 10;   // one read on a connection
+  int write_timeout_seconds = 10;  // one write on a connection
+  int keep_alive_timeout_seconds = 5;
+  int keep_alive_max_requests = 10000;
+  int upload_timeout_seconds = 120;  // a whole request body
+
+  // Keys (bearer tokens). With write_keys set, every write (POST, DELETE) needs one of
+  // them; with read_keys set, every read needs one of read_keys or write_keys.
+  std::vector<std::string> write_keys;
+  std::vector<std::string> read_keys;
+
+  // Logging.
+  std::string log_level = "info";  // trace, debug, info, warn, error, critical, off
+  bool access_log = true;          // one info line per request
+
+  Status Validate() const;
+};
+
+// Applies a TOML document to `config` (only the keys it has). Unknown keys and wrong
+// types are kInvalidArgument naming the key.
+Status ApplyToml(std::string_view toml_text, std::string_view source_name, Config& config);
+
+// Applies MOTIONLODD_<KEY> variables (upper-case option names: MOTIONLODD_PORT,
+// MOTIONLODD_DATA_DIR, MOTIONLODD_WRITE_KEYS as a comma-separated list, ...).
+using GetEnv = std::function<const char*(const char*)>;
+Status ApplyEnvironment(const GetEnv& getenv, Config& config);
+
+// What the command line asks for beyond the config.
+struct Options {
+  Config config;
+  std::string config_file;  // empty: none
+  // --seed FILE: upload this character at start, bake it (--seed-animation NAME, default
+  // its first animation) and print the level URL when done; for the README's run command.
+  std::vector<std::string> seed_files;
+  std::string seed_animation;
+  bool exit = false;  // --help or --version was printed
+  int exit_code = 0;
+};
+
+// Parses flags (see --help), reading the config file they or MOTIONLODD_CONFIG name.
+// `out` receives --help and --version text.
+StatusOr<Options> ParseCommandLine(int argc, const char* const* argv, const GetEnv& getenv,
+                                   std::string* out);
+
+}  // namespace motionlod::server

@@ -1,0 +1,382 @@
+// The only file of the daemon that includes httplib.h (see http_server.h).
+#include "server/http_server.h"
+
+#include <httplib.h>
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <spdlog/spdlog.h>
+#include <sys/socket.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cctype>
+#include <chrono>
+
+namespace motionlod::server {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+// Per connection thread: the request being served (httplib calls the pre-routing
+// handler, the route handler and the logger of one request on the same thread).
+struct RequestContext {
+  bool active = false;
+  std::string id;
+  Clock::time_point start;
+  int route = -1;
+};
+thread_local RequestContext t_request;
+
+constexpr const char* kAnyPath = "[\\s\\S]*";
+// Bytes of an unread request body read and dropped to keep the connection usable.
+constexpr size_t kDrainBytes = size_t{1} << 20;
+// Bodies up to this size are copied into the response instead of streamed.
+constexpr size_t kCopyBodyBytes = size_t{256} << 10;
+
+// Header values we write are our own text; strip line breaks all the same, so that no
+// code path can ever split a response.
+std::string HeaderSafe(std::string value) {
+  value.erase(std::remove_if(value.begin(), value.end(),
+                             [](char c) { return c == '\r' || c == '\n' || c == '\0'; }),
+              value.end());
+  return value;
+}
+
+// A header of the library's request (its map compares names case-insensitively).
+std::optional<std::string_view> Find(const httplib::Request& req, std::string_view name) {
+  const auto found = req.headers.find(std::string(name));
+  if (found == req.headers.end()) return std::nullopt;
+  return std::string_view(found->second);
+}
+
+class SinkAdapter : public http::StreamSink {
+ public:
+  explicit SinkAdapter(httplib::DataSink& sink) : sink_(sink) {}
+  bool Write(std::string_view data) override {
+    if (sink_.is_writable && !sink_.is_writable()) return false;
+    return sink_.write(data.data(), data.size());
+  }
+
+ private:
+  httplib::DataSink& sink_;
+};
+
+}  // namespace
+
+std::vector<HttpMetrics::RouteLabel> RouteLabels(const http::Router& router) {
+  std::vector<HttpMetrics::RouteLabel> labels;
+  for (const http::Route& route : router.routes()) labels.push_back({route.method, route.pattern});
+  return labels;
+}
+
+struct HttpServer::Impl {
+  Impl(const Config& c, const http::Router& r, HttpMetrics& m) : config(c), router(r), metrics(m) {
+    dispatch.write_keys = config.write_keys;
+    dispatch.read_keys = config.read_keys;
+    framing.max_upload_bytes = config.max_upload_bytes;
+    framing.max_json_bytes = config.max_json_bytes;
+  }
+
+  void Configure();
+  void Handle(const httplib::Request& req, httplib::Response& res,
+              const httplib::ContentReader* reader);
+  http::BodyResult ReadBody(const httplib::Request& req, const httplib::ContentReader* reader,
+                            int64_t limit, int max_parts, bool& consumed);
+  void Write(const httplib::Request& req, http::Response& out, httplib::Response& res);
+  void Log(const httplib::Request& req, const httplib::Response& res);
+
+  const Config& config;
+  const http::Router& router;
+  HttpMetrics& metrics;
+  http::DispatchOptions dispatch;
+  http::FramingLimits framing;
+  httplib::Server server;
+  std::atomic<int> listen_fd{-1};
+};
+
+void HttpServer::Impl::Configure() {
+  const int threads = config.http_threads;
+  server.new_task_queue = [threads] {
+    return new httplib::ThreadPool(static_cast<size_t>(threads));
+  };
+  server.set_socket_options([this](int fd) {
+    const int yes = 1;
+    ::setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof yes);
+    // Accepted sockets inherit TCP_NODELAY on Linux: without it every response waits
+    // for the client's delayed ACK (Nagle), about 300 requests per second in all.
+    ::setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &yes, sizeof yes);
+    listen_fd = fd;
+  });
+  server.set_tcp_nodelay(true);
+  server.set_read_timeout(config.read_timeout_seconds, 0);
+  server.set_write_timeout(config.write_timeout_seconds, 0);
+  server.set_keep_alive_timeout(config.keep_alive_timeout_seconds);
+  server.set_keep_alive_max_count(static_cast<size_t>(config.keep_alive_max_requests));
+  server.set_payload_max_length(
+      static_cast<size_t>(std::max(config.max_upload_bytes, config.max_json_bytes)));
+
+  // Every request but POST is served right here: the library has read its (small,
+  // bounded) body already, and its regex route table would only cost time. POST goes
+  // on to the content-reader handler below, which reads the body under our limits.
+  server.set_pre_routing_handler([this](const httplib::Request& req, httplib::Response& res) {
+    t_request = {true, http::NewRequestId(), Clock::now(), -1};
+    http::Request request;
+    request.method = req.method;
+    request.path = req.path;
+    request.request_id = t_request.id;
+    request.header_lookup = [&req](std::string_view name) { return Find(req, name); };
+    http::Response out;
+    if (!http::CheckFraming(request, framing, out)) {
+      // The body is left unread: the connection cannot be reused.
+      out.SetHeader("Connection", "close");
+      Write(req, out, res);
+      return httplib::Server::HandlerResponse::Handled;
+    }
+    if (req.method == "POST") return httplib::Server::HandlerResponse::Unhandled;
+    Handle(req, res, nullptr);
+    return httplib::Server::HandlerResponse::Handled;
+  });
+
+  server.Post(kAnyPath,
+              [this](const httplib::Request& req, httplib::Response& res,
+                     const httplib::ContentReader& reader) { Handle(req, res, &reader); });
+
+  // Errors the library raises itself (malformed request line, header too long, a Range
+  // it cannot parse): problem+json instead of an empty body.
+  server.set_error_handler(
+      httplib::Server::HandlerWithResponse([](const httplib::Request& req, httplib::Response& res) {
+        if (!res.body.empty() || res.content_length_ > 0 || res.content_provider_) {
+          return httplib::Server::HandlerResponse::Unhandled;
+        }
+        const std::string id = t_request.active ? t_request.id : http::NewRequestId();
+        if (!res.has_header("X-Request-Id")) res.set_header("X-Request-Id", id);
+        const_cast<httplib::Request&>(req).ranges.clear();
+        res.set_content(http::ProblemJson(res.status, http::StatusTitle(res.status), req.path, id),
+                        "application/problem+json");
+        return httplib::Server::HandlerResponse::Handled;
+      }));
+  // Never report what was thrown (the library's default puts it in a header).
+  server.set_exception_handler([](const httplib::Request& req, httplib::Response& res,
+                                  std::exception_ptr error) {
+    std::string what = "unknown exception";
+    try {
+      if (error) std::rethrow_exception(error);
+    } catch (const std::exception& e) {
+      what = e.what();
+    } catch (...) {
+    }
+    const std::string id = t_request.active ? t_request.id : http::NewRequestId();
+    spdlog::error("[{}] uncaught exception: {}", id, http::Printable(what));
+    res = httplib::Response();
+    res.status = 500;
+    res.set_header("X-Request-Id", id);
+    res.set_content(http::ProblemJson(500, "internal error; the daemon's log has request id " + id,
+                                      req.path, id),
+                    "application/problem+json");
+  });
+  server.set_logger(
+      [this](const httplib::Request& req, const httplib::Response& res) { Log(req, res); });
+}
+
+http::BodyResult HttpServer::Impl::ReadBody(const httplib::Request& req,
+                                            const httplib::ContentReader* reader, int64_t limit,
+                                            int max_parts, bool& consumed) {
+  consumed = true;
+  if (reader == nullptr) {
+    if (static_cast<int64_t>(req.body.size()) > limit) {
+      return http::BodyFailure{http::BodyError::kTooLarge,
+                               "the body is over " + std::to_string(limit) + " bytes"};
+    }
+    return http::Body{false, req.body, {}};
+  }
+  const auto deadline = Clock::now() + std::chrono::seconds(config.upload_timeout_seconds);
+  int64_t total = 0;
+  bool too_large = false, too_many = false, timed_out = false;
+  http::Body body;
+  const auto count = [&](size_t n) {
+    total += static_cast<int64_t>(n);
+    if (total > limit) {
+      too_large = true;
+      return false;
+    }
+    if (Clock::now() > deadline) {
+      timed_out = true;
+      return false;
+    }
+    return true;
+  };
+  bool ok = false;
+  if (req.is_multipart_form_data()) {
+    body.multipart = true;
+    ok = (*reader)(
+        [&](const httplib::MultipartFormData& part) {
+          if (static_cast<int>(body.parts.size()) >= max_parts) {
+            too_many = true;
+            return false;
+          }
+          body.parts.push_back({part.name, part.filename, part.content_type, {}});
+          return true;
+        },
+        [&](const char* data, size_t n) {
+          if (!count(n) || body.parts.empty()) return false;
+          body.parts.back().bytes.append(data, n);
+          return true;
+        });
+  } else {
+    ok = (*reader)([&](const char* data, size_t n) {
+      if (!count(n)) return false;
+      body.bytes.append(data, n);
+      return true;
+    });
+  }
+  if (too_large) {
+    consumed = false;
+    return http::BodyFailure{http::BodyError::kTooLarge,
+                             "the decoded body is over the limit of " + std::to_string(limit) +
+                                 " bytes (max_upload_bytes / max_json_bytes)"};
+  }
+  if (too_many) {
+    consumed = false;
+    return http::BodyFailure{
+        http::BodyError::kTooManyParts,
+        "more than " + std::to_string(max_parts) + " multipart parts (max_upload_parts)"};
+  }
+  if (timed_out) {
+    consumed = false;
+    return http::BodyFailure{http::BodyError::kTimeout,
+                             "the body took longer than " +
+                                 std::to_string(config.upload_timeout_seconds) +
+                                 " s (upload_timeout_seconds)"};
+  }
+  if (!ok) {
+    consumed = false;
+    return http::BodyFailure{
+        http::BodyError::kMalformed,
+        "the body could not be read: truncated, badly encoded or malformed multipart"};
+  }
+  return body;
+}
+
+void HttpServer::Impl::Handle(const httplib::Request& req, httplib::Response& res,
+                              const httplib::ContentReader* reader) {
+  if (!t_request.active) t_request = {true, http::NewRequestId(), Clock::now(), -1};
+  http::Request request;
+  request.method = req.method;
+  request.path = req.path;
+  request.request_id = t_request.id;
+  for (const auto& [name, value] : req.params) request.query.emplace_back(name, value);
+  request.header_lookup = [&req](std::string_view name) { return Find(req, name); };
+  bool body_read = reader == nullptr;
+  bool request_read_failed = false;  // the reader was used: it cannot be used again
+  request.read_body = [&](int64_t limit, int max_parts) {
+    bool consumed = false;
+    http::BodyResult result = ReadBody(req, reader, limit, max_parts, consumed);
+    body_read = consumed;
+    request_read_failed = !consumed;
+    return result;
+  };
+  http::Response out;
+  t_request.route = http::Dispatch(router, dispatch, request, out);
+  if (t_request.route < 0) t_request.route = metrics.unmatched();
+  // A body left unread would be parsed as the next request. A small one is read and
+  // dropped, so that a client still sending it sees the answer (401, 415, ...) instead
+  // of a reset connection; a large or half-read one closes the connection.
+  if (!body_read && (req.has_header("Content-Length") || req.has_header("Transfer-Encoding"))) {
+    bool drained = false;
+    if (reader != nullptr && !request_read_failed) {
+      size_t seen = 0;
+      drained = (*reader)([&seen](const char*, size_t n) {
+        seen += n;
+        return seen <= kDrainBytes;
+      });
+    }
+    if (!drained) out.SetHeader("Connection", "close");
+  }
+  Write(req, out, res);
+}
+
+void HttpServer::Impl::Write(const httplib::Request& req, http::Response& out,
+                             httplib::Response& res) {
+  // Ranges are answered by the routes; the library must not apply them again.
+  const_cast<httplib::Request&>(req).ranges.clear();
+  res.status = out.status;
+  res.set_header("X-Request-Id", t_request.id);
+  for (auto& [name, value] : out.headers) res.set_header(name, HeaderSafe(std::move(value)));
+  std::function<void()> on_close = std::move(out.on_close);
+  if (out.stream) {
+    auto stream = std::move(out.stream);
+    res.set_chunked_content_provider(
+        out.content_type,
+        [stream](size_t, httplib::DataSink& sink) {
+          SinkAdapter adapter(sink);
+          if (!stream(adapter)) sink.done();
+          return true;
+        },
+        [on_close](bool) {
+          if (on_close) on_close();
+        });
+  } else if (out.shared && out.length <= kCopyBodyBytes) {
+    // Small bodies are copied: the library writes a body string straight to the socket,
+    // while a content provider goes through a std::ostream-based sink per response.
+    res.body.assign(out.shared->data() + out.offset, out.length);
+    res.set_header("Content-Type", out.content_type);
+    if (on_close) on_close();
+  } else if (out.shared) {
+    auto bytes = std::move(out.shared);
+    const size_t offset = out.offset;
+    res.set_content_provider(
+        out.length, out.content_type,
+        [bytes, offset](size_t from, size_t length, httplib::DataSink& sink) {
+          return sink.write(bytes->data() + offset + from, length);
+        },
+        [on_close](bool) {
+          if (on_close) on_close();
+        });
+  } else {
+    if (!out.body.empty() || !out.content_type.empty()) res.set_content(out.body, out.content_type);
+    if (on_close) on_close();
+  }
+}
+
+void HttpServer::Impl::Log(const httplib::Request& req, const httplib::Response& res) {
+  const bool active = t_request.active;
+  const double seconds =
+      active ? std::chrono::duration<double>(Clock::now() - t_request.start).count() : 0.0;
+  metrics.Record(active ? t_request.route : metrics.unmatched(), res.status, seconds);
+  if (config.access_log && spdlog::should_log(spdlog::level::info)) {
+    spdlog::info("[{}] {} {} {} {:.2f} ms {}", active ? t_request.id : "-",
+                 http::Printable(req.method, 16), http::Printable(req.path), res.status,
+                 seconds * 1e3, req.remote_addr);
+  }
+  t_request.active = false;
+}
+
+HttpServer::HttpServer(const Config& config, const http::Router& router, HttpMetrics& metrics)
+    : impl_(std::make_unique<Impl>(config, router, metrics)) {
+  impl_->Configure();
+}
+
+HttpServer::~HttpServer() = default;
+
+StatusOr<int> HttpServer::Bind() {
+  int port = impl_->config.port;
+  if (port == 0) {
+    port = impl_->server.bind_to_any_port(impl_->config.bind);
+    if (port <= 0)
+      return Status(StatusCode::kInternal, "cannot bind " + impl_->config.bind + " on any port");
+  } else if (!impl_->server.bind_to_port(impl_->config.bind, port)) {
+    return Status(StatusCode::kInternal, "cannot bind " + impl_->config.bind + ":" +
+                                             std::to_string(port) +
+                                             " (in use, or not an address here)");
+  }
+  // The library listens with a backlog of 5; a burst of connections would see SYN
+  // retransmits (a second each). listen() again only raises the backlog.
+  if (const int fd = impl_->listen_fd.load(); fd >= 0) ::listen(fd, 1024);
+  return port;
+}
+
+bool HttpServer::Run() { return impl_->server.listen_after_bind(); }
+
+void HttpServer::Stop() { impl_->server.stop(); }
+
+}  // namespace motionlod::server

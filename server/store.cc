@@ -1,0 +1,714 @@
+#include "server/store.h"
+
+#include <sqlite3.h>
+
+#include <nlohmann/json.hpp>
+#include <set>
+
+namespace motionlod::server {
+namespace {
+
+using nlohmann::json;
+
+constexpr int kSchemaVersion = 1;
+
+Status SqlError(sqlite3* db, const std::string& what) {
+  return Status(StatusCode::kInternal, "database: " + what + ": " + sqlite3_errmsg(db));
+}
+
+// One prepared statement; binds by position (1-based), reads columns by index.
+class Statement {
+ public:
+  Statement(sqlite3* db, const char* sql) : db_(db) {
+    rc_ = sqlite3_prepare_v2(db, sql, -1, &stmt_, nullptr);
+  }
+  ~Statement() { sqlite3_finalize(stmt_); }
+  Statement(const Statement&) = delete;
+  Statement& operator=(const Statement&) = delete;
+
+  bool ok() const { return rc_ == SQLITE_OK; }
+  Statement& Bind(int index, const std::string& text) {
+    if (ok())
+      rc_ = sqlite3_bind_text(stmt_, index, text.data(), static_cast<int>(text.size()),
+                              SQLITE_TRANSIENT);
+    return *this;
+  }
+  Statement& Bind(int index, int64_t value) {
+    if (ok()) rc_ = sqlite3_bind_int64(stmt_, index, value);
+    return *this;
+  }
+  Statement& Bind(int index, int value) { return Bind(index, static_cast<int64_t>(value)); }
+  Statement& Bind(int index, double value) {
+    if (ok()) rc_ = sqlite3_bind_double(stmt_, index, value);
+    return *this;
+  }
+  // SQLITE_ROW, SQLITE_DONE or an error code.
+  int Step() {
+    if (!ok()) return rc_;
+    return sqlite3_step(stmt_);
+  }
+  Status Run(const char* what) {
+    const int rc = Step();
+    if (rc != SQLITE_DONE && rc != SQLITE_ROW) return SqlError(db_, what);
+    return Status::Ok();
+  }
+  std::string Text(int column) const {
+    const auto* text = reinterpret_cast<const char*>(sqlite3_column_text(stmt_, column));
+    return text == nullptr ? std::string() : std::string(text, sqlite3_column_bytes(stmt_, column));
+  }
+  int64_t Int(int column) const { return sqlite3_column_int64(stmt_, column); }
+  double Double(int column) const { return sqlite3_column_double(stmt_, column); }
+
+ private:
+  sqlite3* db_;
+  sqlite3_stmt* stmt_ = nullptr;
+  int rc_ = SQLITE_OK;
+};
+
+Status Exec(sqlite3* db, const char* sql) {
+  char* error = nullptr;
+  if (sqlite3_exec(db, sql, nullptr, nullptr, &error) != SQLITE_OK) {
+    Status status(StatusCode::kInternal, std::string("database: ") + (error ? error : "error"));
+    sqlite3_free(error);
+    return status;
+  }
+  return Status::Ok();
+}
+
+// BEGIN IMMEDIATE ... COMMIT, rolled back unless committed.
+class Transaction {
+ public:
+  explicit Transaction(sqlite3* db) : db_(db) { status_ = Exec(db, "BEGIN IMMEDIATE"); }
+  ~Transaction() {
+    if (status_.ok() && !committed_) (void)Exec(db_, "ROLLBACK");
+  }
+  const Status& status() const { return status_; }
+  Status Commit() {
+    Status status = Exec(db_, "COMMIT");
+    committed_ = status.ok();
+    return status;
+  }
+
+ private:
+  sqlite3* db_;
+  Status status_;
+  bool committed_ = false;
+};
+
+std::string FilesToJson(const std::vector<FileRecord>& files) {
+  json array = json::array();
+  for (const FileRecord& f : files)
+    array.push_back({{"name", f.name}, {"blob", f.blob}, {"size", f.size}});
+  return array.dump();
+}
+
+std::vector<FileRecord> FilesFromJson(const std::string& text) {
+  std::vector<FileRecord> files;
+  const json array = json::parse(text, nullptr, false);
+  if (!array.is_array()) return files;
+  for (const json& f : array) {
+    if (!f.is_object()) continue;
+    files.push_back({f.value("name", ""), f.value("blob", ""), f.value("size", int64_t{0})});
+  }
+  return files;
+}
+
+std::string ListToJson(const std::vector<std::string>& items) { return json(items).dump(); }
+
+std::vector<std::string> ListFromJson(const std::string& text) {
+  const json array = json::parse(text, nullptr, false);
+  std::vector<std::string> items;
+  if (!array.is_array()) return items;
+  for (const json& item : array) {
+    if (item.is_string()) items.push_back(item.get<std::string>());
+  }
+  return items;
+}
+
+constexpr const char* kCharacterColumns =
+    "id, name, files, joints, vertices, triangles, proxy_skin, warnings, created_ms, joint_names";
+CharacterRecord ReadCharacter(const Statement& s) {
+  CharacterRecord c;
+  c.id = s.Text(0);
+  c.name = s.Text(1);
+  c.files = FilesFromJson(s.Text(2));
+  c.joints = static_cast<int>(s.Int(3));
+  c.vertices = static_cast<int>(s.Int(4));
+  c.triangles = static_cast<int>(s.Int(5));
+  c.proxy_skin = s.Int(6) != 0;
+  c.warnings = ListFromJson(s.Text(7));
+  c.created_ms = s.Int(8);
+  c.joint_names = ListFromJson(s.Text(9));
+  return c;
+}
+
+constexpr const char* kMotionColumns =
+    "id, character_id, animation, source, source_id, files, duration_seconds, source_fps, "
+    "frames, warnings, created_ms";
+MotionRecord ReadMotion(const Statement& s) {
+  MotionRecord m;
+  m.id = s.Text(0);
+  m.character_id = s.Text(1);
+  m.animation = s.Text(2);
+  m.source = s.Text(3);
+  m.source_id = s.Text(4);
+  m.files = FilesFromJson(s.Text(5));
+  m.duration_seconds = s.Double(6);
+  m.source_fps = s.Double(7);
+  m.frames = static_cast<int>(s.Int(8));
+  m.warnings = ListFromJson(s.Text(9));
+  m.created_ms = s.Int(10);
+  return m;
+}
+
+constexpr const char* kBakeColumns =
+    "id, character_id, motion_id, request, created_ms, level_set, level_set_bytes, report, "
+    "frames, fps";
+BakeRecord ReadBake(const Statement& s) {
+  BakeRecord b;
+  b.id = s.Text(0);
+  b.character_id = s.Text(1);
+  b.motion_id = s.Text(2);
+  b.request_json = s.Text(3);
+  b.created_ms = s.Int(4);
+  b.level_set = s.Text(5);
+  b.level_set_bytes = s.Int(6);
+  b.report_json = s.Text(7);
+  b.frames = static_cast<int>(s.Int(8));
+  b.fps = s.Double(9);
+  return b;
+}
+
+constexpr const char* kJobColumns =
+    "id, bake_id, state, progress, stage, error_code, error_detail, attempts, created_ms, "
+    "started_ms, finished_ms";
+JobRecord ReadJob(const Statement& s) {
+  JobRecord j;
+  j.id = s.Text(0);
+  j.bake_id = s.Text(1);
+  j.state = s.Text(2);
+  j.progress = s.Double(3);
+  j.stage = s.Text(4);
+  j.error_code = s.Text(5);
+  j.error_detail = s.Text(6);
+  j.attempts = static_cast<int>(s.Int(7));
+  j.created_ms = s.Int(8);
+  j.started_ms = s.Int(9);
+  j.finished_ms = s.Int(10);
+  return j;
+}
+
+std::string Sql(const char* head, const char* columns, const char* tail) {
+  return std::string(head) + columns + tail;
+}
+
+// The blobs rows of a bake name (level set and levels).
+Status CollectBakeBlobs(sqlite3* db, const std::string& bake_id, std::set<std::string>& blobs) {
+  Statement bake(db, "SELECT level_set FROM bakes WHERE id = ?");
+  bake.Bind(1, bake_id);
+  while (true) {
+    const int rc = bake.Step();
+    if (rc == SQLITE_DONE) break;
+    if (rc != SQLITE_ROW) return SqlError(db, "read bake");
+    if (!bake.Text(0).empty()) blobs.insert(bake.Text(0));
+  }
+  Statement levels(db, "SELECT hash FROM levels WHERE bake_id = ?");
+  levels.Bind(1, bake_id);
+  while (true) {
+    const int rc = levels.Step();
+    if (rc == SQLITE_DONE) break;
+    if (rc != SQLITE_ROW) return SqlError(db, "read levels");
+    blobs.insert(levels.Text(0));
+  }
+  return Status::Ok();
+}
+
+}  // namespace
+
+StatusOr<std::unique_ptr<Store>> Store::Open(const std::filesystem::path& file) {
+  sqlite3* db = nullptr;
+  const int rc =
+      sqlite3_open_v2(file.c_str(), &db,
+                      SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_FULLMUTEX, nullptr);
+  if (rc != SQLITE_OK) {
+    Status status(StatusCode::kInternal, "cannot open the database " + file.string() + ": " +
+                                             (db ? sqlite3_errmsg(db) : "out of memory"));
+    sqlite3_close(db);
+    return status;
+  }
+  std::unique_ptr<Store> store(new Store(db));
+  sqlite3_busy_timeout(db, 5000);
+  for (const char* pragma :
+       {"PRAGMA journal_mode=WAL", "PRAGMA synchronous=FULL", "PRAGMA foreign_keys=ON"}) {
+    if (Status status = Exec(db, pragma); !status.ok()) return status;
+  }
+  if (Status status = store->Migrate(); !status.ok()) return status;
+  return store;
+}
+
+Store::~Store() { sqlite3_close(db_); }
+
+Status Store::Migrate() {
+  std::lock_guard lock(mutex_);
+  if (Status status =
+          Exec(db_, "CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL)");
+      !status.ok()) {
+    return status;
+  }
+  Statement version(db_, "SELECT value FROM meta WHERE key = 'schema_version'");
+  const int rc = version.Step();
+  if (rc == SQLITE_ROW) {
+    if (version.Text(0) != std::to_string(kSchemaVersion)) {
+      return Status(StatusCode::kUnsupported, "the database has schema version " + version.Text(0) +
+                                                  "; this build reads version " +
+                                                  std::to_string(kSchemaVersion));
+    }
+    return Status::Ok();
+  }
+  if (rc != SQLITE_DONE) return SqlError(db_, "read schema version");
+  Transaction transaction(db_);
+  if (!transaction.status().ok()) return transaction.status();
+  static constexpr const char* kSchema = R"sql(
+CREATE TABLE characters (
+  id TEXT PRIMARY KEY, name TEXT NOT NULL, files TEXT NOT NULL, joints INTEGER NOT NULL,
+  vertices INTEGER NOT NULL, triangles INTEGER NOT NULL, proxy_skin INTEGER NOT NULL,
+  warnings TEXT NOT NULL, created_ms INTEGER NOT NULL, joint_names TEXT NOT NULL);
+CREATE TABLE motions (
+  id TEXT PRIMARY KEY,
+  character_id TEXT NOT NULL REFERENCES characters(id) ON DELETE CASCADE,
+  animation TEXT NOT NULL, source TEXT NOT NULL, source_id TEXT NOT NULL, files TEXT NOT NULL,
+  duration_seconds REAL NOT NULL, source_fps REAL NOT NULL, frames INTEGER NOT NULL,
+  warnings TEXT NOT NULL, created_ms INTEGER NOT NULL);
+CREATE INDEX motions_character ON motions(character_id);
+CREATE TABLE bakes (
+  id TEXT PRIMARY KEY,
+  character_id TEXT NOT NULL REFERENCES characters(id) ON DELETE CASCADE,
+  motion_id TEXT NOT NULL REFERENCES motions(id) ON DELETE CASCADE,
+  request TEXT NOT NULL, created_ms INTEGER NOT NULL, level_set TEXT NOT NULL DEFAULT '',
+  level_set_bytes INTEGER NOT NULL DEFAULT 0, report TEXT NOT NULL DEFAULT '',
+  frames INTEGER NOT NULL DEFAULT 0, fps REAL NOT NULL DEFAULT 0);
+CREATE INDEX bakes_character ON bakes(character_id);
+CREATE INDEX bakes_motion ON bakes(motion_id);
+CREATE TABLE levels (
+  bake_id TEXT NOT NULL REFERENCES bakes(id) ON DELETE CASCADE, idx INTEGER NOT NULL,
+  joints INTEGER NOT NULL, hash TEXT NOT NULL, bytes INTEGER NOT NULL,
+  PRIMARY KEY (bake_id, idx));
+CREATE INDEX levels_hash ON levels(hash);
+CREATE TABLE jobs (
+  seq INTEGER PRIMARY KEY AUTOINCREMENT, id TEXT NOT NULL UNIQUE,
+  bake_id TEXT NOT NULL REFERENCES bakes(id) ON DELETE CASCADE,
+  state TEXT NOT NULL CHECK (state IN ('queued', 'running', 'succeeded', 'failed')),
+  progress REAL NOT NULL DEFAULT 0, stage TEXT NOT NULL DEFAULT '',
+  error_code TEXT NOT NULL DEFAULT '', error_detail TEXT NOT NULL DEFAULT '',
+  attempts INTEGER NOT NULL DEFAULT 0, created_ms INTEGER NOT NULL,
+  started_ms INTEGER NOT NULL DEFAULT 0, finished_ms INTEGER NOT NULL DEFAULT 0);
+CREATE INDEX jobs_bake ON jobs(bake_id);
+CREATE INDEX jobs_state ON jobs(state);
+)sql";
+  if (Status status = Exec(db_, kSchema); !status.ok()) return status;
+  Statement set(db_, "INSERT INTO meta (key, value) VALUES ('schema_version', ?)");
+  set.Bind(1, std::to_string(kSchemaVersion));
+  if (Status status = set.Run("write schema version"); !status.ok()) return status;
+  return transaction.Commit();
+}
+
+StatusOr<bool> Store::InsertCharacter(const CharacterRecord& c,
+                                      const std::vector<MotionRecord>& motions) {
+  std::lock_guard lock(mutex_);
+  Transaction transaction(db_);
+  if (!transaction.status().ok()) return transaction.status();
+  Statement insert(db_, Sql("INSERT OR IGNORE INTO characters (", kCharacterColumns,
+                            ") VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)")
+                            .c_str());
+  insert.Bind(1, c.id)
+      .Bind(2, c.name)
+      .Bind(3, FilesToJson(c.files))
+      .Bind(4, c.joints)
+      .Bind(5, c.vertices)
+      .Bind(6, c.triangles)
+      .Bind(7, c.proxy_skin ? 1 : 0)
+      .Bind(8, ListToJson(c.warnings))
+      .Bind(9, c.created_ms)
+      .Bind(10, ListToJson(c.joint_names));
+  if (Status status = insert.Run("insert character"); !status.ok()) return status;
+  if (sqlite3_changes(db_) == 0) return false;
+  for (const MotionRecord& m : motions) {
+    Statement motion(db_, Sql("INSERT OR IGNORE INTO motions (", kMotionColumns,
+                              ") VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)")
+                              .c_str());
+    motion.Bind(1, m.id)
+        .Bind(2, m.character_id)
+        .Bind(3, m.animation)
+        .Bind(4, m.source)
+        .Bind(5, m.source_id)
+        .Bind(6, FilesToJson(m.files))
+        .Bind(7, m.duration_seconds)
+        .Bind(8, m.source_fps)
+        .Bind(9, m.frames)
+        .Bind(10, ListToJson(m.warnings))
+        .Bind(11, m.created_ms);
+    if (Status status = motion.Run("insert motion"); !status.ok()) return status;
+  }
+  if (Status status = transaction.Commit(); !status.ok()) return status;
+  return true;
+}
+
+StatusOr<std::optional<CharacterRecord>> Store::GetCharacter(const std::string& id) {
+  std::lock_guard lock(mutex_);
+  Statement select(db_, Sql("SELECT ", kCharacterColumns, " FROM characters WHERE id = ?").c_str());
+  select.Bind(1, id);
+  const int rc = select.Step();
+  if (rc == SQLITE_ROW) return std::optional<CharacterRecord>(ReadCharacter(select));
+  if (rc == SQLITE_DONE) return std::optional<CharacterRecord>();
+  return SqlError(db_, "read character");
+}
+
+StatusOr<std::vector<CharacterRecord>> Store::ListCharacters() {
+  std::lock_guard lock(mutex_);
+  Statement select(
+      db_, Sql("SELECT ", kCharacterColumns, " FROM characters ORDER BY created_ms, id").c_str());
+  std::vector<CharacterRecord> list;
+  while (true) {
+    const int rc = select.Step();
+    if (rc == SQLITE_DONE) return list;
+    if (rc != SQLITE_ROW) return SqlError(db_, "list characters");
+    list.push_back(ReadCharacter(select));
+  }
+}
+
+StatusOr<std::vector<std::string>> Store::DeleteCharacter(const std::string& id) {
+  std::lock_guard lock(mutex_);
+  Transaction transaction(db_);
+  if (!transaction.status().ok()) return transaction.status();
+  std::set<std::string> blobs;
+  {
+    Statement select(db_, "SELECT files FROM characters WHERE id = ?");
+    select.Bind(1, id);
+    const int rc = select.Step();
+    if (rc == SQLITE_DONE) return NotFound("no character " + id);
+    if (rc != SQLITE_ROW) return SqlError(db_, "read character");
+    for (const FileRecord& f : FilesFromJson(select.Text(0))) blobs.insert(f.blob);
+  }
+  {
+    Statement motions(db_, "SELECT files FROM motions WHERE character_id = ?");
+    motions.Bind(1, id);
+    while (true) {
+      const int rc = motions.Step();
+      if (rc == SQLITE_DONE) break;
+      if (rc != SQLITE_ROW) return SqlError(db_, "read motions");
+      for (const FileRecord& f : FilesFromJson(motions.Text(0))) blobs.insert(f.blob);
+    }
+  }
+  {
+    std::vector<std::string> bake_ids;
+    Statement bakes(db_, "SELECT id FROM bakes WHERE character_id = ?");
+    bakes.Bind(1, id);
+    while (true) {
+      const int rc = bakes.Step();
+      if (rc == SQLITE_DONE) break;
+      if (rc != SQLITE_ROW) return SqlError(db_, "read bakes");
+      bake_ids.push_back(bakes.Text(0));
+    }
+    for (const std::string& bake : bake_ids) {
+      if (Status status = CollectBakeBlobs(db_, bake, blobs); !status.ok()) return status;
+    }
+  }
+  Statement remove(db_, "DELETE FROM characters WHERE id = ?");
+  remove.Bind(1, id);
+  if (Status status = remove.Run("delete character"); !status.ok()) return status;
+  if (Status status = transaction.Commit(); !status.ok()) return status;
+  return std::vector<std::string>(blobs.begin(), blobs.end());
+}
+
+Status Store::InsertMotions(const std::vector<MotionRecord>& motions) {
+  std::lock_guard lock(mutex_);
+  Transaction transaction(db_);
+  if (!transaction.status().ok()) return transaction.status();
+  for (const MotionRecord& m : motions) {
+    Statement motion(db_, Sql("INSERT OR IGNORE INTO motions (", kMotionColumns,
+                              ") VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)")
+                              .c_str());
+    motion.Bind(1, m.id)
+        .Bind(2, m.character_id)
+        .Bind(3, m.animation)
+        .Bind(4, m.source)
+        .Bind(5, m.source_id)
+        .Bind(6, FilesToJson(m.files))
+        .Bind(7, m.duration_seconds)
+        .Bind(8, m.source_fps)
+        .Bind(9, m.frames)
+        .Bind(10, ListToJson(m.warnings))
+        .Bind(11, m.created_ms);
+    if (Status status = motion.Run("insert motion"); !status.ok()) return status;
+  }
+  return transaction.Commit();
+}
+
+StatusOr<std::optional<MotionRecord>> Store::GetMotion(const std::string& id) {
+  std::lock_guard lock(mutex_);
+  Statement select(db_, Sql("SELECT ", kMotionColumns, " FROM motions WHERE id = ?").c_str());
+  select.Bind(1, id);
+  const int rc = select.Step();
+  if (rc == SQLITE_ROW) return std::optional<MotionRecord>(ReadMotion(select));
+  if (rc == SQLITE_DONE) return std::optional<MotionRecord>();
+  return SqlError(db_, "read motion");
+}
+
+StatusOr<std::vector<MotionRecord>> Store::ListMotions(const std::string& character_id) {
+  std::lock_guard lock(mutex_);
+  Statement select(
+      db_, Sql("SELECT ", kMotionColumns,
+               " FROM motions WHERE character_id = ? ORDER BY source = 'file', created_ms, rowid")
+               .c_str());
+  select.Bind(1, character_id);
+  std::vector<MotionRecord> list;
+  while (true) {
+    const int rc = select.Step();
+    if (rc == SQLITE_DONE) return list;
+    if (rc != SQLITE_ROW) return SqlError(db_, "list motions");
+    list.push_back(ReadMotion(select));
+  }
+}
+
+StatusOr<bool> Store::InsertBakeAndJob(const BakeRecord& bake, const JobRecord& job) {
+  std::lock_guard lock(mutex_);
+  Transaction transaction(db_);
+  if (!transaction.status().ok()) return transaction.status();
+  Statement insert(db_,
+                   "INSERT OR IGNORE INTO bakes (id, character_id, motion_id, request, created_ms) "
+                   "VALUES (?, ?, ?, ?, ?)");
+  insert.Bind(1, bake.id)
+      .Bind(2, bake.character_id)
+      .Bind(3, bake.motion_id)
+      .Bind(4, bake.request_json)
+      .Bind(5, bake.created_ms);
+  if (Status status = insert.Run("insert bake"); !status.ok()) return status;
+  if (sqlite3_changes(db_) == 0) return false;
+  Statement insert_job(db_,
+                       "INSERT INTO jobs (id, bake_id, state, created_ms) VALUES (?, ?, ?, ?)");
+  insert_job.Bind(1, job.id).Bind(2, job.bake_id).Bind(3, job.state).Bind(4, job.created_ms);
+  if (Status status = insert_job.Run("insert job"); !status.ok()) return status;
+  if (Status status = transaction.Commit(); !status.ok()) return status;
+  return true;
+}
+
+StatusOr<std::optional<BakeRecord>> Store::GetBake(const std::string& id) {
+  std::lock_guard lock(mutex_);
+  Statement select(db_, Sql("SELECT ", kBakeColumns, " FROM bakes WHERE id = ?").c_str());
+  select.Bind(1, id);
+  const int rc = select.Step();
+  if (rc == SQLITE_ROW) return std::optional<BakeRecord>(ReadBake(select));
+  if (rc == SQLITE_DONE) return std::optional<BakeRecord>();
+  return SqlError(db_, "read bake");
+}
+
+StatusOr<std::vector<BakeRecord>> Store::ListBakes(const std::string& character_id) {
+  std::lock_guard lock(mutex_);
+  Statement select(db_,
+                   Sql("SELECT ", kBakeColumns,
+                       " FROM bakes WHERE ?1 = '' OR character_id = ?1 ORDER BY created_ms, id")
+                       .c_str());
+  select.Bind(1, character_id);
+  std::vector<BakeRecord> list;
+  while (true) {
+    const int rc = select.Step();
+    if (rc == SQLITE_DONE) return list;
+    if (rc != SQLITE_ROW) return SqlError(db_, "list bakes");
+    BakeRecord record = ReadBake(select);
+    record.report_json.clear();  // lists stay small
+    list.push_back(std::move(record));
+  }
+}
+
+StatusOr<std::vector<LevelRecord>> Store::GetLevels(const std::string& bake_id) {
+  std::lock_guard lock(mutex_);
+  Statement select(db_,
+                   "SELECT idx, joints, hash, bytes FROM levels WHERE bake_id = ? ORDER BY idx");
+  select.Bind(1, bake_id);
+  std::vector<LevelRecord> list;
+  while (true) {
+    const int rc = select.Step();
+    if (rc == SQLITE_DONE) return list;
+    if (rc != SQLITE_ROW) return SqlError(db_, "read levels");
+    list.push_back({static_cast<int>(select.Int(0)), static_cast<int>(select.Int(1)),
+                    select.Text(2), select.Int(3)});
+  }
+}
+
+StatusOr<std::vector<std::string>> Store::DeleteBake(const std::string& id) {
+  std::lock_guard lock(mutex_);
+  Transaction transaction(db_);
+  if (!transaction.status().ok()) return transaction.status();
+  std::set<std::string> blobs;
+  if (Status status = CollectBakeBlobs(db_, id, blobs); !status.ok()) return status;
+  Statement remove(db_, "DELETE FROM bakes WHERE id = ?");
+  remove.Bind(1, id);
+  if (Status status = remove.Run("delete bake"); !status.ok()) return status;
+  if (sqlite3_changes(db_) == 0) return NotFound("no bake " + id);
+  if (Status status = transaction.Commit(); !status.ok()) return status;
+  return std::vector<std::string>(blobs.begin(), blobs.end());
+}
+
+Status Store::CompleteBake(const BakeRecord& bake, const std::vector<LevelRecord>& levels,
+                           const JobRecord& job) {
+  std::lock_guard lock(mutex_);
+  Transaction transaction(db_);
+  if (!transaction.status().ok()) return transaction.status();
+  Statement update(
+      db_,
+      "UPDATE bakes SET level_set = ?, level_set_bytes = ?, report = ?, frames = ?, fps = ? "
+      "WHERE id = ?");
+  update.Bind(1, bake.level_set)
+      .Bind(2, bake.level_set_bytes)
+      .Bind(3, bake.report_json)
+      .Bind(4, bake.frames)
+      .Bind(5, bake.fps)
+      .Bind(6, bake.id);
+  if (Status status = update.Run("complete bake"); !status.ok()) return status;
+  if (sqlite3_changes(db_) == 0) return NotFound("the bake was deleted");
+  Statement clear(db_, "DELETE FROM levels WHERE bake_id = ?");
+  clear.Bind(1, bake.id);
+  if (Status status = clear.Run("clear levels"); !status.ok()) return status;
+  for (const LevelRecord& level : levels) {
+    Statement insert(
+        db_, "INSERT INTO levels (bake_id, idx, joints, hash, bytes) VALUES (?, ?, ?, ?, ?)");
+    insert.Bind(1, bake.id)
+        .Bind(2, level.index)
+        .Bind(3, level.joints)
+        .Bind(4, level.hash)
+        .Bind(5, level.bytes);
+    if (Status status = insert.Run("insert level"); !status.ok()) return status;
+  }
+  Statement update_job(
+      db_,
+      "UPDATE jobs SET state = ?, progress = ?, stage = ?, error_code = ?, "
+      "error_detail = ?, attempts = ?, started_ms = ?, finished_ms = ? WHERE id = ?");
+  update_job.Bind(1, job.state)
+      .Bind(2, job.progress)
+      .Bind(3, job.stage)
+      .Bind(4, job.error_code)
+      .Bind(5, job.error_detail)
+      .Bind(6, job.attempts)
+      .Bind(7, job.started_ms)
+      .Bind(8, job.finished_ms)
+      .Bind(9, job.id);
+  if (Status status = update_job.Run("finish job"); !status.ok()) return status;
+  return transaction.Commit();
+}
+
+StatusOr<std::optional<JobRecord>> Store::GetJob(const std::string& id) {
+  std::lock_guard lock(mutex_);
+  Statement select(db_, Sql("SELECT ", kJobColumns, " FROM jobs WHERE id = ?").c_str());
+  select.Bind(1, id);
+  const int rc = select.Step();
+  if (rc == SQLITE_ROW) return std::optional<JobRecord>(ReadJob(select));
+  if (rc == SQLITE_DONE) return std::optional<JobRecord>();
+  return SqlError(db_, "read job");
+}
+
+StatusOr<bool> Store::UpdateJob(const JobRecord& job) {
+  std::lock_guard lock(mutex_);
+  Statement update(db_,
+                   "UPDATE jobs SET state = ?, progress = ?, stage = ?, error_code = ?, "
+                   "error_detail = ?, attempts = ?, started_ms = ?, finished_ms = ? WHERE id = ?");
+  update.Bind(1, job.state)
+      .Bind(2, job.progress)
+      .Bind(3, job.stage)
+      .Bind(4, job.error_code)
+      .Bind(5, job.error_detail)
+      .Bind(6, job.attempts)
+      .Bind(7, job.started_ms)
+      .Bind(8, job.finished_ms)
+      .Bind(9, job.id);
+  if (Status status = update.Run("update job"); !status.ok()) return status;
+  return sqlite3_changes(db_) > 0;
+}
+
+StatusOr<std::vector<std::string>> Store::TakeUnfinishedJobs() {
+  std::lock_guard lock(mutex_);
+  Transaction transaction(db_);
+  if (!transaction.status().ok()) return transaction.status();
+  Statement reset(
+      db_, "UPDATE jobs SET state = 'queued', progress = 0, stage = '' WHERE state = 'running'");
+  if (Status status = reset.Run("requeue running jobs"); !status.ok()) return status;
+  Statement select(db_, "SELECT id FROM jobs WHERE state = 'queued' ORDER BY seq");
+  std::vector<std::string> ids;
+  while (true) {
+    const int rc = select.Step();
+    if (rc == SQLITE_DONE) break;
+    if (rc != SQLITE_ROW) return SqlError(db_, "list unfinished jobs");
+    ids.push_back(select.Text(0));
+  }
+  if (Status status = transaction.Commit(); !status.ok()) return status;
+  return ids;
+}
+
+StatusOr<std::map<std::string, int64_t>> Store::CountJobsByState() {
+  std::lock_guard lock(mutex_);
+  Statement select(db_, "SELECT state, COUNT(*) FROM jobs GROUP BY state");
+  std::map<std::string, int64_t> counts = {
+      {"queued", 0}, {"running", 0}, {"succeeded", 0}, {"failed", 0}};
+  while (true) {
+    const int rc = select.Step();
+    if (rc == SQLITE_DONE) return counts;
+    if (rc != SQLITE_ROW) return SqlError(db_, "count jobs");
+    counts[select.Text(0)] = select.Int(1);
+  }
+}
+
+StatusOr<std::optional<int64_t>> Store::LevelBytes(const std::string& hash) {
+  std::lock_guard lock(mutex_);
+  Statement select(db_, "SELECT bytes FROM levels WHERE hash = ? LIMIT 1");
+  select.Bind(1, hash);
+  const int rc = select.Step();
+  if (rc == SQLITE_ROW) return std::optional<int64_t>(select.Int(0));
+  if (rc == SQLITE_DONE) return std::optional<int64_t>();
+  return SqlError(db_, "read level");
+}
+
+StatusOr<bool> Store::IsBlobReferenced(const std::string& hash) {
+  std::lock_guard lock(mutex_);
+  // Hashes are 64 hex digits, so a LIKE on the JSON file lists cannot match a prefix of
+  // another hash by accident.
+  Statement select(db_,
+                   "SELECT EXISTS (SELECT 1 FROM levels WHERE hash = ?1) "
+                   "OR EXISTS (SELECT 1 FROM bakes WHERE level_set = ?1) "
+                   "OR EXISTS (SELECT 1 FROM characters WHERE files LIKE '%\"' || ?1 || '\"%') "
+                   "OR EXISTS (SELECT 1 FROM motions WHERE files LIKE '%\"' || ?1 || '\"%')");
+  select.Bind(1, hash);
+  if (select.Step() != SQLITE_ROW) return SqlError(db_, "check blob references");
+  return select.Int(0) != 0;
+}
+
+StatusOr<std::vector<std::string>> Store::ReferencedBlobs() {
+  std::lock_guard lock(mutex_);
+  std::set<std::string> blobs;
+  {
+    Statement select(
+        db_, "SELECT hash FROM levels UNION SELECT level_set FROM bakes WHERE level_set != ''");
+    while (true) {
+      const int rc = select.Step();
+      if (rc == SQLITE_DONE) break;
+      if (rc != SQLITE_ROW) return SqlError(db_, "list level blobs");
+      blobs.insert(select.Text(0));
+    }
+  }
+  for (const char* sql : {"SELECT files FROM characters", "SELECT files FROM motions"}) {
+    Statement select(db_, sql);
+    while (true) {
+      const int rc = select.Step();
+      if (rc == SQLITE_DONE) break;
+      if (rc != SQLITE_ROW) return SqlError(db_, "list file blobs");
+      for (const FileRecord& f : FilesFromJson(select.Text(0))) blobs.insert(f.blob);
+    }
+  }
+  return std::vector<std::string>(blobs.begin(), blobs.end());
+}
+
+bool Store::Healthy() {
+  std::lock_guard lock(mutex_);
+  Statement select(db_, "SELECT 1");
+  return select.Step() == SQLITE_ROW;
+}
+
+}  // namespace motionlod::server

@@ -1,0 +1,314 @@
+// The daemon's parts on their own: level cache, job queue, store, blob store, router,
+// framing guards, metrics, and the one-file rule for httplib.h.
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <regex>
+#include <set>
+#include <sstream>
+#include <thread>
+
+#include "io/sha256.h"
+#include "server/blob_store.h"
+#include "server/http.h"
+#include "server/job_queue.h"
+#include "server/level_cache.h"
+#include "server/metrics.h"
+#include "server/routes.h"
+#include "server/service.h"
+#include "server/store.h"
+#include "tests/server/daemon.h"
+
+namespace motionlod::server {
+namespace {
+
+namespace fs = std::filesystem;
+
+LevelCache::Bytes Bytes(size_t n) { return std::make_shared<const std::string>(n, 'x'); }
+
+TEST(LevelCache, EvictsLeastRecentlyUsedBeyondTheByteBudget) {
+  LevelCache cache(100);
+  cache.Put("a", Bytes(40));
+  cache.Put("b", Bytes(40));
+  ASSERT_NE(cache.Get("a"), nullptr);  // a is now the most recent
+  cache.Put("c", Bytes(40));           // 120 > 100: b goes
+  EXPECT_EQ(cache.Get("b"), nullptr);
+  EXPECT_NE(cache.Get("a"), nullptr);
+  EXPECT_NE(cache.Get("c"), nullptr);
+  const LevelCache::Stats stats = cache.stats();
+  EXPECT_EQ(stats.bytes, 80);
+  EXPECT_EQ(stats.entries, 2);
+  EXPECT_EQ(stats.evictions, 1u);
+  EXPECT_EQ(stats.hits, 3u);
+  EXPECT_EQ(stats.misses, 1u);
+}
+
+TEST(LevelCache, KeepsNothingLargerThanTheBudgetAndSharesValuesPastEviction) {
+  LevelCache cache(10);
+  cache.Put("big", Bytes(11));
+  EXPECT_EQ(cache.Get("big"), nullptr);
+  cache.Put("a", Bytes(10));
+  LevelCache::Bytes held = cache.Get("a");
+  cache.Put("b", Bytes(10));
+  EXPECT_EQ(cache.Get("a"), nullptr);
+  EXPECT_EQ(held->size(), 10u);  // still valid for the response that holds it
+}
+
+TEST(JobQueue, RefusesBeyondCapacityExceptWhenForcedAndRunsInOrder) {
+  std::mutex mutex;
+  std::condition_variable cv;
+  bool release = false;
+  std::vector<std::string> ran;
+  JobQueue queue(2, 1, [&](const std::string& id) {
+    std::unique_lock lock(mutex);
+    cv.wait(lock, [&] { return release; });
+    ran.push_back(id);
+  });
+  EXPECT_EQ(queue.Push("a"), JobQueue::PushResult::kQueued);
+  while (queue.running() == 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  EXPECT_EQ(queue.Push("b"), JobQueue::PushResult::kQueued);
+  EXPECT_EQ(queue.Push("b"), JobQueue::PushResult::kAlreadyQueued);
+  EXPECT_EQ(queue.Push("c"), JobQueue::PushResult::kQueued);
+  EXPECT_EQ(queue.Push("d"), JobQueue::PushResult::kFull);
+  EXPECT_EQ(queue.Push("d", /*force=*/true), JobQueue::PushResult::kQueued);
+  EXPECT_TRUE(queue.Remove("c"));
+  EXPECT_EQ(queue.depth(), 2u);
+  {
+    std::lock_guard lock(mutex);
+    release = true;
+  }
+  cv.notify_all();
+  while (queue.depth() > 0 || queue.running() > 0)
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  queue.Stop();
+  EXPECT_EQ(ran, (std::vector<std::string>{"a", "b", "d"}));
+  EXPECT_EQ(queue.Push("e"), JobQueue::PushResult::kStopped);
+}
+
+TEST(BlobStore, WritesAtomicallyUnderTheHashAndDetectsCorruption) {
+  const fs::path dir = testing::TestDirectory();
+  auto store = BlobStore::Open(dir / "blobs");
+  ASSERT_TRUE(store.ok());
+  auto hash = (*store)->Put("hello");
+  ASSERT_TRUE(hash.ok());
+  EXPECT_EQ(*hash, io::Sha256Hex("hello"));
+  const fs::path file = dir / "blobs" / "sha256" / hash->substr(0, 2) / hash->substr(2);
+  EXPECT_TRUE(fs::exists(file));
+  EXPECT_EQ(*(*store)->Get(*hash), "hello");
+  EXPECT_EQ((*store)->List(), std::vector<std::string>{*hash});
+  std::ofstream(file, std::ios::binary) << "hellO";
+  EXPECT_EQ((*store)->Get(*hash).status().code(), StatusCode::kDataLoss);
+  EXPECT_EQ((*store)->Get(std::string(64, 'a')).status().code(), StatusCode::kNotFound);
+  EXPECT_EQ((*store)->Get("../../etc/passwd").status().code(), StatusCode::kInvalidArgument);
+  // A temporary file left by a crash is removed at the next open.
+  std::ofstream(file.parent_path() / ".tmp-abc123") << "partial";
+  ASSERT_TRUE(BlobStore::Open(dir / "blobs").ok());
+  EXPECT_FALSE(fs::exists(file.parent_path() / ".tmp-abc123"));
+  fs::remove_all(dir);
+}
+
+TEST(Store, KeepsJobsAcrossReopensAndRequeuesTheUnfinished) {
+  const fs::path dir = testing::TestDirectory();
+  {
+    auto store = Store::Open(dir / "db");
+    ASSERT_TRUE(store.ok()) << store.status().message();
+    CharacterRecord c;
+    c.id = std::string(64, 'c');
+    c.name = "c.glb";
+    c.files = {{"c.glb", std::string(64, 'f'), 3}};
+    c.joints = 2;
+    c.joint_names = {"root", "hip"};
+    c.created_ms = 1;
+    MotionRecord m;
+    m.id = std::string(64, 'm');
+    m.character_id = c.id;
+    m.animation = "walk";
+    m.source = "character";
+    m.source_id = c.id;
+    ASSERT_TRUE(*(*store)->InsertCharacter(c, {m}));
+    EXPECT_FALSE(*(*store)->InsertCharacter(c, {m}));
+    for (const char* id : {"1", "2", "3"}) {
+      BakeRecord b;
+      b.id = std::string(64, id[0]);
+      b.character_id = c.id;
+      b.motion_id = m.id;
+      b.request_json = "{}";
+      b.created_ms = 1;
+      JobRecord j;
+      j.id = b.id;
+      j.bake_id = b.id;
+      j.state = "queued";
+      ASSERT_TRUE(*(*store)->InsertBakeAndJob(b, j));
+      EXPECT_FALSE(*(*store)->InsertBakeAndJob(b, j));
+    }
+    JobRecord running = **(*store)->GetJob(std::string(64, '2'));
+    running.state = "running";
+    running.attempts = 1;
+    ASSERT_TRUE(*(*store)->UpdateJob(running));
+    JobRecord done = **(*store)->GetJob(std::string(64, '3'));
+    done.state = "succeeded";
+    ASSERT_TRUE(*(*store)->UpdateJob(done));
+    EXPECT_EQ((**(*store)->GetCharacter(c.id)).joint_names,
+              (std::vector<std::string>{"root", "hip"}));
+  }
+  auto store = Store::Open(dir / "db");
+  ASSERT_TRUE(store.ok());
+  auto unfinished = (*store)->TakeUnfinishedJobs();
+  ASSERT_TRUE(unfinished.ok());
+  EXPECT_EQ(*unfinished, (std::vector<std::string>{std::string(64, '1'), std::string(64, '2')}));
+  EXPECT_EQ((**(*store)->GetJob(std::string(64, '2'))).state, "queued");
+  EXPECT_EQ((*store)->CountJobsByState()->at("queued"), 2);
+  // Deleting the character deletes its bakes and jobs and names the blobs to collect.
+  auto blobs = (*store)->DeleteCharacter(std::string(64, 'c'));
+  ASSERT_TRUE(blobs.ok());
+  EXPECT_EQ(*blobs, std::vector<std::string>{std::string(64, 'f')});
+  EXPECT_FALSE((*store)->GetJob(std::string(64, '1'))->has_value());
+  EXPECT_FALSE(*(*store)->IsBlobReferenced(std::string(64, 'f')));
+  fs::remove_all(dir);
+}
+
+TEST(Router, MatchesTemplatesAndListsTheMethodsOfAPath) {
+  http::Router router;
+  router.Add("GET", "/v1/bakes/{id}", http::Access::kRead, nullptr);
+  router.Add("DELETE", "/v1/bakes/{id}", http::Access::kWrite, nullptr);
+  router.Add("GET", "/v1/bakes/{id}/level", http::Access::kRead, nullptr);
+  const auto get = router.Find("GET", "/v1/bakes/abc");
+  EXPECT_EQ(get.route, 0);
+  EXPECT_EQ(get.params, std::vector<std::string>{"abc"});
+  EXPECT_EQ(router.Find("HEAD", "/v1/bakes/abc").route, 0);
+  EXPECT_EQ(router.Find("DELETE", "/v1/bakes/abc").route, 1);
+  const auto put = router.Find("PUT", "/v1/bakes/abc");
+  EXPECT_EQ(put.route, -1);
+  EXPECT_EQ(put.allowed, (std::vector<std::string>{"GET", "HEAD", "DELETE"}));
+  EXPECT_TRUE(router.Find("GET", "/v1/bakes/").allowed.empty());
+  EXPECT_TRUE(router.Find("GET", "/v1/bakes/a/b").allowed.empty());
+}
+
+TEST(Dispatch, ChecksKeysAndTurnsExceptionsIntoAGeneric500) {
+  http::Router router;
+  router.Add("POST", "/w", http::Access::kWrite,
+             [](http::Request&, http::Response& r) { r.status = 201; });
+  router.Add("GET", "/boom", http::Access::kPublic,
+             [](http::Request&, http::Response&) { throw std::runtime_error("secret detail"); });
+  http::DispatchOptions options{{"wwwwwwwwwwwwwwww"}, {}};
+  http::Request request;
+  request.method = "POST";
+  request.path = "/w";
+  request.request_id = "0123456789abcdef";
+  http::Response denied;
+  http::Dispatch(router, options, request, denied);
+  EXPECT_EQ(denied.status, 401);
+  request.headers = {{"authorization", "Bearer wwwwwwwwwwwwwwww"}};
+  http::Response allowed;
+  http::Dispatch(router, options, request, allowed);
+  EXPECT_EQ(allowed.status, 201);
+  request.method = "GET";
+  request.path = "/boom";
+  http::Response boom;
+  EXPECT_EQ(http::Dispatch(router, options, request, boom), -1);
+  EXPECT_EQ(boom.status, 500);
+  EXPECT_EQ(boom.content_type, "application/problem+json");
+  EXPECT_EQ(boom.body.find("secret"), std::string::npos);
+}
+
+TEST(CheckFraming, RefusesAmbiguousOversizeAndUnexpectedBodies) {
+  const http::FramingLimits limits{1000, 100};
+  const auto check = [&](const std::string& method,
+                         std::vector<std::pair<std::string, std::string>> headers) {
+    http::Request request;
+    request.method = method;
+    request.path = "/v1/characters";
+    request.headers = std::move(headers);
+    http::Response response;
+    return http::CheckFraming(request, limits, response) ? 0 : response.status;
+  };
+  EXPECT_EQ(check("POST", {{"content-length", "1000"}}), 0);
+  EXPECT_EQ(check("POST", {{"content-length", "1001"}}), 413);
+  EXPECT_EQ(check("POST", {{"content-length", "12abc"}}), 400);
+  EXPECT_EQ(check("POST", {{"content-length", "5"}, {"transfer-encoding", "chunked"}}), 400);
+  EXPECT_EQ(check("POST", {{"transfer-encoding", "gzip, chunked"}}), 501);
+  EXPECT_EQ(check("POST", {{"transfer-encoding", "chunked"}}), 0);
+  EXPECT_EQ(check("POST", {{"content-encoding", "compress"}}), 415);
+  EXPECT_EQ(check("POST", {{"content-encoding", "gzip"}}), 0);
+  EXPECT_EQ(check("POST", {{"transfer-encoding", "chunked"},
+                           {"content-type", "multipart/form-data; boundary=x"}}),
+            411);
+  EXPECT_EQ(check("GET", {{"content-length", "0"}}), 0);
+  EXPECT_EQ(check("GET", {{"content-length", "1"}}), 400);
+  EXPECT_EQ(check("DELETE", {{"transfer-encoding", "chunked"}}), 400);
+}
+
+TEST(Metrics, RenderPrometheusTextWithCumulativeBuckets) {
+  HttpMetrics metrics(std::vector<HttpMetrics::RouteLabel>{{"GET", "/v1/levels/{hash}"}});
+  metrics.Record(0, 200, 0.0007);
+  metrics.Record(0, 200, 0.02);
+  metrics.Record(0, 404, 0.0001);
+  metrics.Record(5, 400, 0.1);  // out of range: unmatched
+  std::string text;
+  metrics.Render(text);
+  EXPECT_NE(text.find("motionlodd_http_requests_total{route=\"/v1/levels/"
+                      "{hash}\",method=\"GET\",code=\"200\"} 2"),
+            std::string::npos)
+      << text;
+  EXPECT_NE(text.find("code=\"404\"} 1"), std::string::npos);
+  EXPECT_NE(text.find("route=\"unmatched\",method=\"\",code=\"400\"} 1"), std::string::npos);
+  EXPECT_NE(text.find("le=\"0.001\"} 2"), std::string::npos) << text;
+  EXPECT_NE(text.find("le=\"+Inf\"} 3"), std::string::npos);
+}
+
+TEST(Layering, OnlyHttpServerCcIncludesHttplibAndTheServerIncludesNoClientOrTool) {
+  const std::regex httplib_include("#include [<\"]httplib\\.h[>\"]");
+  const std::regex higher("#include \"(client|tools)/");
+  std::vector<std::string> includers;
+  for (const auto& entry : fs::directory_iterator(testing::SourcePath("server"))) {
+    const std::string text = testing::ReadFile(entry.path().string());
+    if (std::regex_search(text, httplib_include))
+      includers.push_back(entry.path().filename().string());
+    EXPECT_FALSE(std::regex_search(text, higher)) << entry.path();
+  }
+  EXPECT_EQ(includers, std::vector<std::string>{"http_server.cc"});
+  // proto stays free of Eigen and core.
+  const std::string api = testing::ReadFile(testing::SourcePath("proto/api.h")) +
+                          testing::ReadFile(testing::SourcePath("proto/api.cc"));
+  EXPECT_EQ(api.find("#include \"core/"), std::string::npos);
+  EXPECT_EQ(api.find("#include <Eigen"), std::string::npos);
+}
+
+TEST(OpenApi, TheServedSpecDescribesExactlyTheRoutesTheDaemonHas) {
+  const fs::path dir = testing::TestDirectory();
+  Config config;
+  config.data_dir = (dir / "data").string();
+  auto service = Service::Open(config);
+  ASSERT_TRUE(service.ok()) << service.status().message();
+  std::atomic<int> streams{0}, uploads{0};
+  RouteContext context{service->get(), &config, [](std::string&) {}, &streams, &uploads};
+  const http::Router router = MakeRouter(context);
+  // (method, path) pairs of the spec: "  /path:" then "    get:" lines under "paths:".
+  const std::string yaml(OpenApiYaml());
+  EXPECT_EQ(yaml, testing::ReadFile(testing::SourcePath("proto/openapi.yaml")));
+  std::set<std::pair<std::string, std::string>> documented;
+  std::istringstream lines(
+      yaml.substr(yaml.find("\npaths:\n"), yaml.find("\ncomponents:\n") - yaml.find("\npaths:\n")));
+  std::string line, path;
+  const std::regex path_line("^  (/[^:]*):$"), method_line("^    (get|post|delete|put|patch):.*$");
+  std::smatch match;
+  while (std::getline(lines, line)) {
+    if (std::regex_match(line, match, path_line)) path = match[1];
+    if (std::regex_match(line, match, method_line)) {
+      std::string method = match[1];
+      std::transform(method.begin(), method.end(), method.begin(), ::toupper);
+      documented.insert({method, path});
+    }
+  }
+  std::set<std::pair<std::string, std::string>> served;
+  for (const http::Route& route : router.routes()) served.insert({route.method, route.pattern});
+  EXPECT_EQ(documented, served);
+  EXPECT_GE(served.size(), 20u);
+  fs::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace motionlod::server

@@ -1,0 +1,104 @@
+// Accepted jobs survive a crash: SIGKILL with one bake running and others queued, start
+// again on the same data, and every bake completes with the level files an
+// uninterrupted run (the engine in-process) produces, byte for byte.
+#include <gtest/gtest.h>
+#include <signal.h>
+
+#include "io/asset.h"
+#include "pipeline/bake.h"
+#include "proto/api.h"
+#include "proto/level_format.h"
+#include "server/service.h"
+#include "tests/server/test_util.h"
+
+namespace motionlod::server::testing {
+namespace {
+
+constexpr const char* kSampleId =
+    "11422afd50abf7e8c92ea107e2e0bc94abd38023d6d15f55ad580347efbfa29e";
+
+TEST(DaemonRestart, JobsQueuedOrRunningAtASigkillCompleteAfterARestartWithIdenticalLevels) {
+  const std::string sample = SourcePath("samples/Rig_Medium_MovementBasic.glb");
+  Daemon daemon(TestDirectory());
+  ASSERT_TRUE(daemon.Start({"--threads", "1", "--bake-threads", "1"})) << daemon.error;
+  auto client = daemon.Client();
+  ASSERT_EQ(UploadFile(*client, sample, "rig.glb")->status, 201);
+  std::vector<std::string> ids;
+  for (const char* motion : {"Jump_Full_Long", "Walking_A", "Running_A", "Walking_C"}) {
+    auto submitted = SubmitBake(
+        *client,
+        {{"character", kSampleId}, {"motion", motion}, {"all_levels", true}, {"fps", 500}});
+    ASSERT_TRUE(submitted);
+    ASSERT_EQ(submitted->status, 202) << submitted->body;
+    ids.push_back(Json(submitted)["id"]);
+  }
+  // Kill while the first runs and the others wait.
+  bool running = false;
+  for (int tries = 0; tries < 400 && !running; ++tries) {
+    running = Json(client->Get(("/v1/jobs/" + ids[0]).c_str())).value("state", "") == "running";
+    if (!running) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  ASSERT_TRUE(running);
+  EXPECT_EQ(Json(client->Get(("/v1/jobs/" + ids[3]).c_str())).value("state", ""), "queued");
+  EXPECT_EQ(daemon.Stop(SIGKILL), 128 + SIGKILL);
+
+  ASSERT_TRUE(daemon.Start({"--threads", "1", "--bake-threads", "2"})) << daemon.error;
+  client = daemon.Client();
+  EXPECT_NE(daemon.Log().find("requeued 4 unfinished jobs"), std::string::npos) << daemon.Log();
+  auto character = io::LoadAssetFile(sample);
+  ASSERT_TRUE(character.ok());
+  for (const std::string& id : ids) {
+    const json finished = WaitForJob(*client, id, 120);
+    ASSERT_EQ(finished.value("state", ""), "succeeded") << finished.dump();
+    const json bake = Json(client->Get(("/v1/bakes/" + id).c_str()));
+    if (id == ids[0]) {
+      EXPECT_EQ(finished["attempts"], 2) << "the running job ran again";
+    }
+
+    // The uninterrupted run.
+    auto request = proto::api::ParseBakeRequest(bake["request"].dump());
+    ASSERT_TRUE(request.ok());
+    pipeline::BakeRequest p = MakePipelineRequest(*request, bake["animation"], 1);
+    p.character = *character;
+    p.source_hash =
+        MakeBakeKey(*request, "character", bake["animation"], p.settings.Hash()).source_hash;
+    auto expected = pipeline::Bake(p);
+    ASSERT_TRUE(expected.ok()) << expected.status().message();
+    const proto::AlignedBytes aligned = proto::AlignedBytes::CopyOf(expected->level_set);
+    auto view = proto::DecodeLevelSet(aligned.bytes());
+    ASSERT_TRUE(view.ok());
+    ASSERT_EQ(bake["levels"].size(), view->level_count());
+    for (uint32_t l = 0; l < view->level_count(); ++l) {
+      auto fetched = client->Get(bake["levels"][l]["url"].get<std::string>().c_str());
+      ASSERT_TRUE(fetched);
+      auto one = proto::ExtractLevel(*view, l);
+      ASSERT_TRUE(one.ok());
+      EXPECT_TRUE(fetched->body == *one) << "bake " << id << " level " << l;
+    }
+  }
+  EXPECT_EQ(daemon.Stop(SIGTERM), 0);
+}
+
+TEST(DaemonRestart, SigtermLeavesUnfinishedJobsQueuedForTheNextStart) {
+  const std::string sample = SourcePath("samples/Rig_Medium_MovementBasic.glb");
+  Daemon daemon(TestDirectory());
+  ASSERT_TRUE(daemon.Start({"--threads", "1", "--drain-seconds", "0"})) << daemon.error;
+  auto client = daemon.Client();
+  ASSERT_EQ(UploadFile(*client, sample, "rig.glb")->status, 201);
+  std::vector<std::string> ids;
+  for (const char* motion : {"Jump_Full_Long", "Walking_B"}) {
+    auto submitted = SubmitBake(
+        *client,
+        {{"character", kSampleId}, {"motion", motion}, {"all_levels", true}, {"fps", 800}});
+    ASSERT_TRUE(submitted);
+    ids.push_back(Json(submitted)["id"]);
+  }
+  EXPECT_EQ(daemon.Stop(SIGTERM), 0) << daemon.Log();
+  ASSERT_TRUE(daemon.Start({"--threads", "1"})) << daemon.error;
+  client = daemon.Client();
+  for (const std::string& id : ids)
+    EXPECT_EQ(WaitForJob(*client, id, 120).value("state", ""), "succeeded");
+}
+
+}  // namespace
+}  // namespace motionlod::server::testing
