@@ -24,5 +24,12 @@ if [ "$assimp_files" != "io/assimp_scene.cc " ]; then
   echo "layering: only io/assimp_scene.cc may include Assimp, found: $assimp_files"
   status=1
 fi
+# cpp-httplib stays behind one file of the server.
+httplib_files=$(grep -RlE '^#include [<"]httplib\.h' server 2>/dev/null | sort | tr '\n' ' ')
+if [ -n "$httplib_files" ] && [ "$httplib_files" != "server/http_server.cc " ]; then
+  echo "layering: only server/http_server.cc may include httplib.h, found: $httplib_files"
+  status=1
+fi
+forbid server 'tools/|client/' "the tools or the client"
 [ $status -eq 0 ] && echo "layering: ok"
 exit $status
