@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
-# The README's run command: install what is missing, build, and bake the embedded sample
-# character (CC0) with the default ladder, printing its level table.
+# The README's run command: install what is missing, build, and start motionlodd on
+# http://127.0.0.1:${PORT:-8080} with the embedded CC0 sample character uploaded and baked;
+# it prints the URLs and the level table, and serves until Ctrl-C (SIGINT drains).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 bash scripts/build.sh -DMOTIONLOD_BUILD_TESTS=OFF
-./build/tools/motionlod bake samples/Rig_Medium_MovementBasic.glb --animation Walking_A \
-  --out out/sample
+exec ./build/server/motionlodd --config config/motionlodd.toml --data-dir out/motionlodd \
+  --port "${PORT:-8080}" --seed samples/Rig_Medium_MovementBasic.glb --seed-animation Walking_A

@@ -128,8 +128,14 @@ std::optional<std::string_view> Request::Query(std::string_view name) const {
 }
 
 void Response::SetHeader(std::string name, std::string value) {
+  const auto same = [](std::string_view a, std::string_view b) {
+    return a.size() == b.size() && std::equal(a.begin(), a.end(), b.begin(), [](char x, char y) {
+             return std::tolower(static_cast<unsigned char>(x)) ==
+                    std::tolower(static_cast<unsigned char>(y));
+           });
+  };
   for (auto& [key, existing] : headers) {
-    if (Lower(key) == Lower(name)) {
+    if (same(key, name)) {
       existing = std::move(value);
       return;
     }
@@ -215,29 +221,33 @@ Router::Match Router::Find(std::string_view method, std::string_view path) const
   if (path.empty() || path[0] != '/') return match;
   const std::vector<std::string_view> segments = SplitView(path);
   const std::string_view wanted = method == "HEAD" ? std::string_view("GET") : method;
+  const auto matches = [&](const Route& route) {
+    if (route.segments.size() != segments.size()) return false;
+    for (size_t s = 0; s < segments.size(); ++s) {
+      const std::string& expected = route.segments[s];
+      const bool placeholder =
+          expected.size() >= 2 && expected.front() == '{' && expected.back() == '}';
+      if (placeholder ? segments[s].empty() : expected != segments[s]) return false;
+    }
+    return true;
+  };
   for (size_t r = 0; r < routes_.size(); ++r) {
     const Route& route = routes_[r];
-    if (route.segments.size() != segments.size()) continue;
-    std::vector<std::string> params;
-    bool same = true;
-    for (size_t s = 0; s < segments.size() && same; ++s) {
+    if (route.method != wanted || !matches(route)) continue;
+    match.route = static_cast<int>(r);
+    for (size_t s = 0; s < segments.size(); ++s) {
       const std::string& expected = route.segments[s];
-      if (expected.size() >= 2 && expected.front() == '{' && expected.back() == '}') {
-        if (segments[s].empty()) same = false;
-        params.emplace_back(segments[s]);
-      } else {
-        same = expected == segments[s];
-      }
+      if (expected.size() >= 2 && expected.front() == '{') match.params.emplace_back(segments[s]);
     }
-    if (!same) continue;
+    return match;
+  }
+  // No route for this method: the methods the path has, for 405 and OPTIONS.
+  for (const Route& route : routes_) {
+    if (!matches(route)) continue;
     if (std::find(match.allowed.begin(), match.allowed.end(), route.method) ==
         match.allowed.end()) {
       match.allowed.push_back(route.method);
       if (route.method == "GET") match.allowed.push_back("HEAD");
-    }
-    if (route.method == wanted && match.route < 0) {
-      match.route = static_cast<int>(r);
-      match.params = std::move(params);
     }
   }
   return match;
@@ -258,11 +268,12 @@ int Dispatch(const Router& router, const DispatchOptions& options, Request& requ
         response.status = 204;
         return -1;
       }
-      SetProblem(request, response, 405,
-                 request.method.size() <= 16 &&
-                         std::all_of(request.method.begin(), request.method.end(), ::isupper)
-                     ? request.method + " is not allowed here; allowed: " + allow
-                     : "the method is not allowed here; allowed: " + allow);
+      SetProblem(
+          request, response, 405,
+          request.method.size() <= 16 && std::all_of(request.method.begin(), request.method.end(),
+                                                     [](char c) { return c >= 'A' && c <= 'Z'; })
+              ? request.method + " is not allowed here; allowed: " + allow
+              : "the method is not allowed here; allowed: " + allow);
       return -1;
     }
     const Route& route = router.routes()[static_cast<size_t>(match.route)];
@@ -346,7 +357,7 @@ bool CheckFraming(const Request& request, const FramingLimits& limits, Response&
     }
     return true;
   }
-  if (length > limits.max_upload_bytes) {
+  if (length > limits.max_upload_bytes + limits.drain_bytes) {
     SetProblem(request, response, 413,
                "the body has " + std::to_string(length) + " bytes; the limit is " +
                    std::to_string(limits.max_upload_bytes) + " (max_upload_bytes)");

@@ -149,6 +149,10 @@ int Dispatch(const Router& router, const DispatchOptions& options, Request& requ
 struct FramingLimits {
   int64_t max_upload_bytes = 0;
   int64_t max_json_bytes = 0;
+  // A POST whose Content-Length is over max_upload_bytes by at most this much gets
+  // through, so that its body is read and dropped and the 413 reaches a client that
+  // sends it whole; beyond, it is refused at once and the connection closed.
+  int64_t drain_bytes = 0;
 };
 bool CheckFraming(const Request& request, const FramingLimits& limits, Response& response);
 

@@ -30,8 +30,6 @@ thread_local RequestContext t_request;
 constexpr const char* kAnyPath = "[\\s\\S]*";
 // Bytes of an unread request body read and dropped to keep the connection usable.
 constexpr size_t kDrainBytes = size_t{1} << 20;
-// Bodies up to this size are copied into the response instead of streamed.
-constexpr size_t kCopyBodyBytes = size_t{256} << 10;
 
 // Header values we write are our own text; strip line breaks all the same, so that no
 // code path can ever split a response.
@@ -75,6 +73,7 @@ struct HttpServer::Impl {
     dispatch.read_keys = config.read_keys;
     framing.max_upload_bytes = config.max_upload_bytes;
     framing.max_json_bytes = config.max_json_bytes;
+    framing.drain_bytes = static_cast<int64_t>(kDrainBytes);
   }
 
   void Configure();
@@ -112,8 +111,10 @@ void HttpServer::Impl::Configure() {
   server.set_write_timeout(config.write_timeout_seconds, 0);
   server.set_keep_alive_timeout(config.keep_alive_timeout_seconds);
   server.set_keep_alive_max_count(static_cast<size_t>(config.keep_alive_max_requests));
+  // Bodies a little over the limits are read and dropped (see ReadBody) so the client
+  // sees the 413; the library's own check only refuses beyond that.
   server.set_payload_max_length(
-      static_cast<size_t>(std::max(config.max_upload_bytes, config.max_json_bytes)));
+      kDrainBytes + static_cast<size_t>(std::max(config.max_upload_bytes, config.max_json_bytes)));
 
   // Every request but POST is served right here: the library has read its (small,
   // bounded) body already, and its regex route table would only cost time. POST goes
@@ -193,17 +194,16 @@ http::BodyResult HttpServer::Impl::ReadBody(const httplib::Request& req,
   int64_t total = 0;
   bool too_large = false, too_many = false, timed_out = false;
   http::Body body;
+  // Over the limit, up to kDrainBytes more are read and dropped, so that a client
+  // still sending sees the 413 on a connection that stays usable; beyond, it is cut.
   const auto count = [&](size_t n) {
     total += static_cast<int64_t>(n);
-    if (total > limit) {
-      too_large = true;
-      return false;
-    }
     if (Clock::now() > deadline) {
       timed_out = true;
       return false;
     }
-    return true;
+    if (total > limit) too_large = true;
+    return total <= limit + static_cast<int64_t>(kDrainBytes);
   };
   bool ok = false;
   if (req.is_multipart_form_data()) {
@@ -219,18 +219,18 @@ http::BodyResult HttpServer::Impl::ReadBody(const httplib::Request& req,
         },
         [&](const char* data, size_t n) {
           if (!count(n) || body.parts.empty()) return false;
-          body.parts.back().bytes.append(data, n);
+          if (!too_large) body.parts.back().bytes.append(data, n);
           return true;
         });
   } else {
     ok = (*reader)([&](const char* data, size_t n) {
       if (!count(n)) return false;
-      body.bytes.append(data, n);
+      if (!too_large) body.bytes.append(data, n);
       return true;
     });
   }
   if (too_large) {
-    consumed = false;
+    consumed = ok && !timed_out;  // read to its end within the drain allowance
     return http::BodyFailure{http::BodyError::kTooLarge,
                              "the decoded body is over the limit of " + std::to_string(limit) +
                                  " bytes (max_upload_bytes / max_json_bytes)"};
@@ -315,12 +315,6 @@ void HttpServer::Impl::Write(const httplib::Request& req, http::Response& out,
         [on_close](bool) {
           if (on_close) on_close();
         });
-  } else if (out.shared && out.length <= kCopyBodyBytes) {
-    // Small bodies are copied: the library writes a body string straight to the socket,
-    // while a content provider goes through a std::ostream-based sink per response.
-    res.body.assign(out.shared->data() + out.offset, out.length);
-    res.set_header("Content-Type", out.content_type);
-    if (on_close) on_close();
   } else if (out.shared) {
     auto bytes = std::move(out.shared);
     const size_t offset = out.offset;
@@ -329,9 +323,8 @@ void HttpServer::Impl::Write(const httplib::Request& req, http::Response& out,
         [bytes, offset](size_t from, size_t length, httplib::DataSink& sink) {
           return sink.write(bytes->data() + offset + from, length);
         },
-        [on_close](bool) {
-          if (on_close) on_close();
-        });
+        on_close ? httplib::ContentProviderResourceReleaser([on_close](bool) { on_close(); })
+                 : httplib::ContentProviderResourceReleaser());
   } else {
     if (!out.body.empty() || !out.content_type.empty()) res.set_content(out.body, out.content_type);
     if (on_close) on_close();

@@ -251,8 +251,25 @@ Status Service::Start() {
     }
   }
   const int workers = config_.threads > 0 ? config_.threads : pipeline::ResolveThreads(0);
-  queue_ = std::make_unique<JobQueue>(static_cast<size_t>(config_.queue_capacity), workers,
-                                      [this](const std::string& id) { RunJob(id); });
+  queue_ = std::make_unique<JobQueue>(
+      static_cast<size_t>(config_.queue_capacity), workers, [this](const std::string& id) {
+        try {
+          RunJob(id);
+        } catch (const std::exception& error) {  // out of memory on a huge bake, ...
+          spdlog::error("bake {} threw: {}", id, error.what());
+          auto job = store_->GetJob(id);
+          if (job.ok() && job->has_value()) {
+            JobRecord record = **job;
+            record.state = "failed";
+            record.error_code = "internal";
+            record.error_detail = "the bake ran out of resources or hit an internal error";
+            record.finished_ms = NowMs();
+            (void)store_->UpdateJob(record);
+            Publish(record, /*erase=*/true);
+          }
+          ++bakes_failed_;
+        }
+      });
   for (const std::string& id : *unfinished) queue_->Push(id, /*force=*/true);
   if (!unfinished->empty()) spdlog::info("requeued {} unfinished jobs", unfinished->size());
   spdlog::info("{} bake workers, {} threads per bake, queue capacity {}", workers,
@@ -370,6 +387,7 @@ Status Service::StoreFiles(const std::vector<io::SourceFile>& files,
 }
 
 void Service::CollectBlobs(const std::vector<std::string>& blobs) {
+  std::unique_lock lock(blobs_mutex_);
   for (const std::string& hash : blobs) {
     auto referenced = store_->IsBlobReferenced(hash);
     if (!referenced.ok() || *referenced) continue;
@@ -415,6 +433,7 @@ Result<Created<api::CharacterInfo>> Service::UploadCharacter(std::vector<io::Sou
   CharacterRecord record;
   record.id = id;
   record.name = files[0].name;
+  std::shared_lock blob_lock(blobs_mutex_);
   if (Status status = StoreFiles(files, record.files); !status.ok()) return Internal(status);
   record.joints = static_cast<int>(raw.skeleton.parents.size());
   record.vertices = static_cast<int>(raw.skin.positions.size());
@@ -573,6 +592,7 @@ Result<Created<std::vector<api::MotionInfo>>> Service::UploadMotion(
     created = created || !existing->has_value();
   }
   std::vector<FileRecord> records;
+  std::shared_lock blob_lock(blobs_mutex_);
   if (Status status = StoreFiles(files, records); !status.ok()) return Internal(status);
   for (MotionRecord& m : motions) m.files = records;
   if (Status status = store_->InsertMotions(motions); !status.ok()) return Internal(status);
@@ -870,7 +890,9 @@ void Service::RunJob(const std::string& id) {
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   job.stage = "store";
-  if (Status status = FinishBake(**bake, std::move(*output), job); !status.ok()) {
+  std::vector<std::string> written;
+  if (Status status = FinishBake(**bake, std::move(*output), job, written); !status.ok()) {
+    CollectBlobs(written);  // what no row names (the bake was deleted meanwhile)
     if (status.code() == StatusCode::kNotFound) return Publish(job, true);
     return fail("internal", status.message());
   }
@@ -880,14 +902,15 @@ void Service::RunJob(const std::string& id) {
   spdlog::info("bake {} succeeded in {:.3f} s", id, seconds);
 }
 
-Status Service::FinishBake(const BakeRecord& bake_in, pipeline::BakeOutput output, JobRecord& job) {
+Status Service::FinishBake(const BakeRecord& bake_in, pipeline::BakeOutput output, JobRecord& job,
+                           std::vector<std::string>& written) {
+  std::shared_lock blob_lock(blobs_mutex_);
   const proto::AlignedBytes aligned = proto::AlignedBytes::CopyOf(output.level_set);
   auto view = proto::DecodeLevelSet(aligned.bytes());
   if (!view.ok())
     return Status(StatusCode::kInternal,
                   "the bake wrote an unreadable level set: " + view.status().message());
   std::vector<LevelRecord> levels;
-  std::vector<std::string> written;
   for (uint32_t l = 0; l < view->level_count(); ++l) {
     auto one = proto::ExtractLevel(*view, l);
     if (!one.ok()) return one.status();
@@ -911,10 +934,7 @@ Status Service::FinishBake(const BakeRecord& bake_in, pipeline::BakeOutput outpu
   job.progress = 1;
   job.stage = "done";
   job.finished_ms = NowMs();
-  if (Status status = store_->CompleteBake(bake, levels, job); !status.ok()) {
-    if (status.code() == StatusCode::kNotFound) CollectBlobs(written);  // deleted meanwhile
-    return status;
-  }
+  if (Status status = store_->CompleteBake(bake, levels, job); !status.ok()) return status;
   return Status::Ok();
 }
 

@@ -20,6 +20,7 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <shared_mutex>
 #include <string>
 #include <variant>
 #include <vector>
@@ -155,7 +156,9 @@ class Service {
 
   explicit Service(const Config& config);
   void RunJob(const std::string& id);
-  Status FinishBake(const BakeRecord& bake, pipeline::BakeOutput output, JobRecord& job);
+  // Stores the levels and commits the bake; `written` receives the blobs it wrote.
+  Status FinishBake(const BakeRecord& bake, pipeline::BakeOutput output, JobRecord& job,
+                    std::vector<std::string>& written);
   void Publish(const JobRecord& record, bool erase = false);  // board update + notify
   StatusOr<std::shared_ptr<const io::Asset>> LoadSource(const std::string& source_id,
                                                         const std::vector<FileRecord>& files);
@@ -185,6 +188,11 @@ class Service {
 
   std::mutex tables_mutex_;
   std::map<std::string, std::shared_ptr<const LevelTable>> tables_;
+
+  // Writers hold it shared from writing blobs to committing the rows that name them;
+  // CollectBlobs holds it exclusively from checking references to removing files, so a
+  // blob is never removed between being written and being named.
+  std::shared_mutex blobs_mutex_;
 
   std::atomic<int> imports_{0};
   Histogram bake_seconds_;

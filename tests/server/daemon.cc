@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <poll.h>
 #include <signal.h>
+#include <sys/prctl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -26,6 +27,11 @@ const bool kIgnoreSigpipe = [] {
 Daemon::~Daemon() {
   if (pid_ > 0) Stop(SIGKILL);
   if (stdout_fd_ >= 0) ::close(stdout_fd_);
+  // Kept when the test failed: its daemon.log says why.
+  if (!::testing::Test::HasFailure()) {
+    std::error_code ignored;
+    fs::remove_all(dir_, ignored);
+  }
 }
 
 bool Daemon::Start(const std::vector<std::string>& args, const std::vector<std::string>& env) {
@@ -51,6 +57,7 @@ bool Daemon::Start(const std::vector<std::string>& args, const std::vector<std::
   const int log_fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
   const pid_t pid = ::fork();
   if (pid == 0) {
+    ::prctl(PR_SET_PDEATHSIG, SIGKILL);  // no daemon outlives a crashed test
     ::dup2(out[1], STDOUT_FILENO);
     if (log_fd >= 0) ::dup2(log_fd, STDERR_FILENO);
     ::execve(argv[0], argv.data(), envp.data());

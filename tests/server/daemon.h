@@ -17,7 +17,7 @@ namespace motionlod::server::testing {
 class Daemon {
  public:
   // `dir` holds data/ and daemon.log; kept across Start() calls so a restart finds
-  // the same data.
+  // the same data, and removed with the Daemon unless the test failed.
   explicit Daemon(std::filesystem::path dir) : dir_(std::move(dir)) {}
   ~Daemon();
 
