@@ -505,17 +505,30 @@ StatusOr<LevelResult> PreparedMotion::SolveLevel(const ReducedSkeleton& level, D
     }
     if (d.settings.resolve_rigid_translation) {
       // x_T = G_TT^-1 (b_T - G_TN x_N): translations are rows 4s+3, the rest is fixed.
-      MatrixXd g_tt(m, m), g_tn(m, 3 * m), b_t(m, cols), x_n(3 * m, cols);
+      // G_TT and G_TN keep G's block sparsity, so both products stay sparse.
+      std::vector<Eigen::Triplet<double>> tt, tn;
       for (int s = 0; s < m; ++s) {
         for (int u = 0; u < m; ++u) {
-          g_tt(s, u) = g(4 * s + 3, 4 * u + 3);
-          for (int r = 0; r < 3; ++r) g_tn(s, 3 * u + r) = g(4 * s + 3, 4 * u + r);
+          if (g(4 * s + 3, 4 * u + 3) != 0) tt.emplace_back(s, u, g(4 * s + 3, 4 * u + 3));
+          for (int r = 0; r < 3; ++r) {
+            if (g(4 * s + 3, 4 * u + r) != 0) tn.emplace_back(s, 3 * u + r, g(4 * s + 3, 4 * u + r));
+          }
         }
+      }
+      SparseMatrixd g_tt(m, m), g_tn(m, 3 * m);
+      g_tt.setFromTriplets(tt.begin(), tt.end());
+      g_tn.setFromTriplets(tn.begin(), tn.end());
+      MatrixXd b_t(m, cols), x_n(3 * m, cols);
+      for (int s = 0; s < m; ++s) {
         b_t.row(s) = b.row(4 * s + 3);
         for (int r = 0; r < 3; ++r) x_n.row(3 * s + r) = x.row(4 * s + r);
       }
-      b_t.noalias() -= g_tn * x_n;
-      const MatrixXd x_t = g_tt.llt().solve(b_t);
+      b_t -= g_tn * x_n;
+      const Eigen::SimplicialLLT<SparseMatrixd, Eigen::Lower, Eigen::AMDOrdering<int>> llt_tt(g_tt);
+      if (llt_tt.info() != Eigen::Success) {
+        return Status(StatusCode::kInternal, "SolveLevel: the translation block is not positive definite");
+      }
+      const MatrixXd x_t = llt_tt.solve(b_t);
       for (int s = 0; s < m; ++s) x.row(4 * s + 3) = x_t.row(s);
     }
   }
