@@ -13,16 +13,9 @@
 
 namespace motionlod::io {
 
-// Keys of one node, times in seconds from the clip start, ascending; any list may be
-// empty (the node's rest value is used then). Rotations are unit quaternions.
-struct Track {
+// A node's keys in clip time: seconds from the clip start.
+struct Track : NodeKeys {
   int node = -1;
-  std::vector<double> position_times;
-  std::vector<Eigen::Vector3d> positions;
-  std::vector<double> rotation_times;
-  std::vector<Eigen::Quaterniond> rotations;
-  std::vector<double> scaling_times;
-  std::vector<Eigen::Vector3d> scalings;
 };
 
 struct Clip {

@@ -47,16 +47,20 @@ struct SceneMesh {
   std::vector<SceneBone> bones;
 };
 
-// Keys of one node; times in ticks, ascending. Any of the three lists may be empty (the
-// node's rest value is used then).
-struct SceneChannel {
-  std::string node_name;
+// Keys of one node, times ascending. Any of the three lists may be empty (the node's
+// rest value is used then). Rotations are unit quaternions.
+struct NodeKeys {
   std::vector<double> position_times;
   std::vector<Eigen::Vector3d> positions;
   std::vector<double> rotation_times;
   std::vector<Eigen::Quaterniond> rotations;
   std::vector<double> scaling_times;
   std::vector<Eigen::Vector3d> scalings;
+};
+
+// A node's keys as the file gives them: times in ticks.
+struct SceneChannel : NodeKeys {
+  std::string node_name;
 };
 
 struct SceneAnimation {
