@@ -163,20 +163,6 @@ StatusOr<std::shared_ptr<const Character>> BuildCharacter(RawCharacter raw) {
   c->height_ = (hi - lo).maxCoeff();
   if (!(c->height_ > 0)) c->height_ = 1.0;
 
-  // Per-joint vertex lists (CSR by joint) and their bounding spheres.
-  c->joint_vertex_offsets_.assign(n + 1, 0);
-  for (int32_t j : k.influence_joints) ++c->joint_vertex_offsets_[j + 1];
-  for (int j = 0; j < n; ++j) c->joint_vertex_offsets_[j + 1] += c->joint_vertex_offsets_[j];
-  c->joint_vertices_.resize(k.influence_joints.size());
-  {
-    std::vector<uint32_t> cursor(c->joint_vertex_offsets_.begin(), c->joint_vertex_offsets_.end() - 1);
-    for (int i = 0; i < p; ++i) {
-      for (uint32_t e = k.influence_offsets[i]; e < k.influence_offsets[i + 1]; ++e) {
-        c->joint_vertices_[cursor[k.influence_joints[e]]++] = static_cast<uint32_t>(i);
-      }
-    }
-  }
-  // Bounding boxes per joint and per cluster; clusters by recursive median splits.
   auto box_of = [&](const uint32_t* begin, const uint32_t* end, Vec3d& center, Vec3d& half) {
     Vec3d lo = Vec3d::Constant(std::numeric_limits<double>::infinity());
     Vec3d hi = -lo;
@@ -187,41 +173,103 @@ StatusOr<std::shared_ptr<const Character>> BuildCharacter(RawCharacter raw) {
     center = 0.5 * (lo + hi);
     half = 0.5 * (hi - lo);
   };
-  c->joint_vertex_centers_.resize(n);
-  c->joint_vertex_half_extents_.assign(n, Vec3d::Zero());
-  c->joint_cluster_offsets_.assign(1, 0);
-  c->cluster_vertex_offsets_.assign(1, 0);
-  for (int j = 0; j < n; ++j) {
-    const uint32_t begin = c->joint_vertex_offsets_[j], end = c->joint_vertex_offsets_[j + 1];
-    if (begin == end) {
-      c->joint_vertex_centers_[j] = s.bind_world[j].col(3);
-    } else {
-      uint32_t* base = c->joint_vertices_.data();
-      box_of(base + begin, base + end, c->joint_vertex_centers_[j], c->joint_vertex_half_extents_[j]);
-      // Depth-first splitting keeps each cluster's vertices contiguous and in order.
-      std::vector<std::pair<uint32_t, uint32_t>> stack{{begin, end}};
-      while (!stack.empty()) {
-        const auto [lo, hi] = stack.back();
-        stack.pop_back();
-        Vec3d center, half;
-        box_of(base + lo, base + hi, center, half);
-        if (hi - lo <= static_cast<uint32_t>(Character::kMaxClusterVertices)) {
-          c->cluster_vertex_offsets_.push_back(hi);
-          c->cluster_centers_.push_back(center);
-          c->cluster_half_extents_.push_back(half);
-          continue;
-        }
-        int axis = 0;
-        half.maxCoeff(&axis);
-        const uint32_t mid = lo + (hi - lo) / 2;
-        std::nth_element(base + lo, base + mid, base + hi, [&](uint32_t x, uint32_t y) {
-          return k.positions[x][axis] < k.positions[y][axis];
-        });
-        stack.push_back({mid, hi});
-        stack.push_back({lo, mid});
+  // Bounding box of each joint's weighted vertices.
+  {
+    std::vector<Vec3d> lo(n, Vec3d::Constant(std::numeric_limits<double>::infinity()));
+    std::vector<Vec3d> hi(n, Vec3d::Constant(-std::numeric_limits<double>::infinity()));
+    for (int i = 0; i < p; ++i) {
+      for (uint32_t e = k.influence_offsets[i]; e < k.influence_offsets[i + 1]; ++e) {
+        const int j = k.influence_joints[e];
+        lo[j] = lo[j].cwiseMin(k.positions[i].cast<double>());
+        hi[j] = hi[j].cwiseMax(k.positions[i].cast<double>());
       }
     }
-    c->joint_cluster_offsets_.push_back(static_cast<uint32_t>(c->cluster_centers_.size()));
+    c->joint_vertex_centers_.resize(n);
+    c->joint_vertex_half_extents_.assign(n, Vec3d::Zero());
+    for (int j = 0; j < n; ++j) {
+      if (lo[j].x() > hi[j].x()) {
+        c->joint_vertex_centers_[j] = s.bind_world[j].col(3);
+      } else {
+        c->joint_vertex_centers_[j] = 0.5 * (lo[j] + hi[j]);
+        c->joint_vertex_half_extents_[j] = 0.5 * (hi[j] - lo[j]);
+      }
+    }
+  }
+  // Vertices grouped by dominant joint (a counting sort), then clustered per group.
+  std::vector<int> dominant_joint(p, 0);
+  for (int i = 0; i < p; ++i) {
+    float largest = -1;
+    for (uint32_t e = k.influence_offsets[i]; e < k.influence_offsets[i + 1]; ++e) {
+      if (k.influence_weights[e] > largest) {
+        largest = k.influence_weights[e];
+        dominant_joint[i] = k.influence_joints[e];
+      }
+    }
+  }
+  std::vector<uint32_t> group_offsets(n + 1, 0);
+  for (int i = 0; i < p; ++i) ++group_offsets[dominant_joint[i] + 1];
+  for (int j = 0; j < n; ++j) group_offsets[j + 1] += group_offsets[j];
+  c->cluster_vertices_.resize(p);
+  {
+    std::vector<uint32_t> cursor(group_offsets.begin(), group_offsets.end() - 1);
+    for (int i = 0; i < p; ++i) c->cluster_vertices_[cursor[dominant_joint[i]]++] = static_cast<uint32_t>(i);
+  }
+  // The largest weight each joint gives the vertices [begin, end), appended as a list.
+  std::vector<float> max_weight(n, 0.0f);
+  std::vector<int32_t> touched;
+  auto append_influences = [&](const uint32_t* begin, const uint32_t* end,
+                               std::vector<Character::MaxInfluence>& list,
+                               std::vector<uint32_t>& offsets) {
+    for (const uint32_t* v = begin; v != end; ++v) {
+      for (uint32_t e = k.influence_offsets[*v]; e < k.influence_offsets[*v + 1]; ++e) {
+        const int32_t j = k.influence_joints[e];
+        if (max_weight[j] == 0) touched.push_back(j);
+        max_weight[j] = std::max(max_weight[j], k.influence_weights[e]);
+      }
+    }
+    for (int32_t j : touched) {
+      list.push_back({j, max_weight[j]});
+      max_weight[j] = 0;
+    }
+    touched.clear();
+    offsets.push_back(static_cast<uint32_t>(list.size()));
+  };
+  c->group_cluster_offsets_.assign(1, 0);
+  c->cluster_vertex_offsets_.assign(1, 0);
+  c->group_influence_offsets_.assign(1, 0);
+  c->cluster_influence_offsets_.assign(1, 0);
+  uint32_t* base = c->cluster_vertices_.data();
+  c->group_centers_.assign(n, Vec3d::Zero());
+  c->group_half_extents_.assign(n, Vec3d::Zero());
+  for (int j = 0; j < n; ++j) {
+    const uint32_t begin = group_offsets[j], end = group_offsets[j + 1];
+    if (begin != end) box_of(base + begin, base + end, c->group_centers_[j], c->group_half_extents_[j]);
+    append_influences(base + begin, base + end, c->group_influences_, c->group_influence_offsets_);
+    // Depth-first splitting keeps each cluster's vertices contiguous.
+    std::vector<std::pair<uint32_t, uint32_t>> stack;
+    if (begin != end) stack.push_back({begin, end});
+    while (!stack.empty()) {
+      const auto [lo, hi] = stack.back();
+      stack.pop_back();
+      Vec3d center, half;
+      box_of(base + lo, base + hi, center, half);
+      if (hi - lo <= static_cast<uint32_t>(Character::kMaxClusterVertices)) {
+        c->cluster_vertex_offsets_.push_back(hi);
+        c->cluster_centers_.push_back(center);
+        c->cluster_half_extents_.push_back(half);
+        append_influences(base + lo, base + hi, c->cluster_influences_, c->cluster_influence_offsets_);
+        continue;
+      }
+      int axis = 0;
+      half.maxCoeff(&axis);
+      const uint32_t mid = lo + (hi - lo) / 2;
+      std::nth_element(base + lo, base + mid, base + hi, [&](uint32_t x, uint32_t y) {
+        return k.positions[x][axis] < k.positions[y][axis];
+      });
+      stack.push_back({mid, hi});
+      stack.push_back({lo, mid});
+    }
+    c->group_cluster_offsets_.push_back(static_cast<uint32_t>(c->cluster_centers_.size()));
   }
 
   // h_j = l_j: summed distance from joint j to each leaf of its subtree. A childless

@@ -66,23 +66,38 @@ class Character {
   // Longest side of the bind-pose bounding box of the mesh (length): the "height"
   // that percentages of vertex error refer to.
   double height() const { return height_; }
-  // Vertices with a non-zero weight on joint j (CSR by joint), grouped by cluster.
-  const std::vector<uint32_t>& joint_vertex_offsets() const { return joint_vertex_offsets_; }
-  const std::vector<uint32_t>& joint_vertices() const { return joint_vertices_; }
-  // Each joint's vertices split into spatially compact clusters of at most
-  // kMaxClusterVertices (median splits along the longest axis): joint j's clusters are
-  // [joint_cluster_offsets[j], joint_cluster_offsets[j+1]); cluster c's vertices are
-  // joint_vertices[cluster_vertex_offsets[c] .. cluster_vertex_offsets[c+1]). Their
-  // bind-pose boxes bound how far a joint's error can move its vertices.
-  static constexpr int kMaxClusterVertices = 32;
-  const std::vector<uint32_t>& joint_cluster_offsets() const { return joint_cluster_offsets_; }
-  const std::vector<uint32_t>& cluster_vertex_offsets() const { return cluster_vertex_offsets_; }
-  const std::vector<Vec3d>& cluster_centers() const { return cluster_centers_; }
-  const std::vector<Vec3d>& cluster_half_extents() const { return cluster_half_extents_; }
   // Axis-aligned bounding box (bind pose) of the vertices weighted to joint j, as center
   // and half extents; the joint's bind position and zero extents when none are.
   const std::vector<Vec3d>& joint_vertex_centers() const { return joint_vertex_centers_; }
   const std::vector<Vec3d>& joint_vertex_half_extents() const { return joint_vertex_half_extents_; }
+
+  // Every vertex in exactly one cluster, for bounding how far per-joint matrix errors
+  // can move the skin without visiting it. Vertices are grouped by their dominant joint
+  // (largest weight, the first listed on ties); each group is split into spatially compact
+  // clusters of at most kMaxClusterVertices by median splits along the longest axis.
+  // Group j's clusters are [group_cluster_offsets[j], group_cluster_offsets[j+1]);
+  // cluster c's vertices are cluster_vertices[cluster_vertex_offsets[c] ..
+  // cluster_vertex_offsets[c+1]).
+  static constexpr int kMaxClusterVertices = 32;
+  const std::vector<uint32_t>& group_cluster_offsets() const { return group_cluster_offsets_; }
+  // Bounding box of each group (center, half extents; zero for an empty group).
+  const std::vector<Vec3d>& group_centers() const { return group_centers_; }
+  const std::vector<Vec3d>& group_half_extents() const { return group_half_extents_; }
+  const std::vector<uint32_t>& cluster_vertex_offsets() const { return cluster_vertex_offsets_; }
+  const std::vector<uint32_t>& cluster_vertices() const { return cluster_vertices_; }
+  const std::vector<Vec3d>& cluster_centers() const { return cluster_centers_; }
+  const std::vector<Vec3d>& cluster_half_extents() const { return cluster_half_extents_; }
+  // The joints that weight any vertex of a group or cluster, each with the largest weight
+  // it gives one of them (CSR): a vertex moves by at most sum_g w_g |Delta_g [v;1]|, so
+  // these weights bound a whole cluster's error from per-joint bounds.
+  struct MaxInfluence {
+    int32_t joint = 0;
+    float weight = 0;
+  };
+  const std::vector<uint32_t>& group_influence_offsets() const { return group_influence_offsets_; }
+  const std::vector<MaxInfluence>& group_influences() const { return group_influences_; }
+  const std::vector<uint32_t>& cluster_influence_offsets() const { return cluster_influence_offsets_; }
+  const std::vector<MaxInfluence>& cluster_influences() const { return cluster_influences_; }
   // Direct children of each joint.
   const std::vector<std::vector<int>>& children() const { return children_; }
   int FindJoint(const std::string& name) const;  // -1 when absent
@@ -109,14 +124,19 @@ class Character {
   std::vector<double> vertex_areas_;
   std::vector<double> subtree_lengths_;
   double height_ = 0;
-  std::vector<uint32_t> joint_vertex_offsets_;
-  std::vector<uint32_t> joint_vertices_;
   std::vector<Vec3d> joint_vertex_centers_;
   std::vector<Vec3d> joint_vertex_half_extents_;
-  std::vector<uint32_t> joint_cluster_offsets_;
+  std::vector<uint32_t> group_cluster_offsets_;
+  std::vector<Vec3d> group_centers_;
+  std::vector<Vec3d> group_half_extents_;
   std::vector<uint32_t> cluster_vertex_offsets_;
+  std::vector<uint32_t> cluster_vertices_;
   std::vector<Vec3d> cluster_centers_;
   std::vector<Vec3d> cluster_half_extents_;
+  std::vector<uint32_t> group_influence_offsets_;
+  std::vector<MaxInfluence> group_influences_;
+  std::vector<uint32_t> cluster_influence_offsets_;
+  std::vector<MaxInfluence> cluster_influences_;
   std::vector<std::vector<int>> children_;
   std::vector<JointPairMoment> joint_pair_moments_;
 };

@@ -71,7 +71,9 @@ struct PreparedMotion::Impl {
   std::vector<Eigen::Matrix4d> pair_cp;
   std::vector<Eigen::Matrix3d> pair_cn;
   SparseMatrixd q_fit;            // alpha Cp + beta_fit Cn
-  MatrixXd f;                     // q_fit * kt, 4n x 3T
+  // The right-hand sides are assembled transposed (3T x 4m, see SolveSpdTransposed)
+  // from transposed copies: ft = (q_fit * kt)^T and ktt = kt^T, both 3T x 4n.
+  MatrixXd ft, ktt;
   std::vector<Eigen::Vector4d> joint_point;      // [p0_j; 1]
   std::vector<Eigen::Vector4d> joint_axis;       // [o0_j; 0], the bind y axis
   std::vector<double> joint_weight;              // omega * b_j
@@ -205,7 +207,16 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
   }
   d.beta_fit = FitsNormals(settings.variant) ? d.beta : 0.0;
   d.q_fit = d.alpha * d.cp + d.beta_fit * d.cn;
-  d.f = d.q_fit * d.kt;
+  d.ktt = d.kt.transpose();
+  // F^T = Kt^T Q (Q is symmetric): each nonzero of Q adds one contiguous column of all
+  // frames, where the sparse-dense product Q Kt updates one coefficient at a time (about
+  // ten times the instructions; the same products summed in the same order).
+  d.ft = MatrixXd::Zero(3 * frames, 4 * n);
+  for (int col = 0; col < d.q_fit.outerSize(); ++col) {
+    for (SparseMatrixd::InnerIterator it(d.q_fit, col); it; ++it) {
+      d.ft.col(col).noalias() += it.value() * d.ktt.col(it.row());
+    }
+  }
   d.joint_fit.resize(n);
   for (int j = 0; j < n; ++j) {
     d.joint_fit[j] = d.joint_weight[j] *
@@ -215,7 +226,12 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
 
   // The sample for the per-vertex figures, with the original blended normals.
   d.sample_frames = EvenlySpaced(settings.sample_frames, frames);
-  const int stride = (p + settings.sample_vertices - 1) / settings.sample_vertices;
+  constexpr int64_t kMinSampleVertices = 64;
+  const int64_t motion_budget =
+      static_cast<int64_t>(p) * frames / (100 * static_cast<int64_t>(d.sample_frames.size()));
+  const int64_t sample_vertices =
+      std::min<int64_t>(settings.sample_vertices, std::max(kMinSampleVertices, motion_budget));
+  const int stride = static_cast<int>((p + sample_vertices - 1) / sample_vertices);
   for (int i = 0; i < p; i += stride) {
     d.sample_vertices.push_back(i);
     d.sample_area += c.vertex_areas()[i];
@@ -258,12 +274,22 @@ void PreparedMotion::Impl::QuadraticErrors(const MatrixXd& delta, const std::vec
   out.en_vertex.assign(frames, 0.0);
   out.en_joint.assign(frames, 0.0);
   const int rows = static_cast<int>(delta.rows());
+  // Pairs with a joint whose Delta is exactly zero in every frame add nothing (every
+  // kept joint of a baseline): skip them.
+  std::vector<size_t> active_pairs;
+  {
+    std::vector<char> moves(n);
+    for (int k = 0; k < n; ++k) moves[k] = !delta.middleRows(4 * k, 4).isZero(0.0);
+    for (size_t q = 0; q < pairs.size(); ++q) {
+      if (moves[pairs[q].first] && moves[pairs[q].second]) active_pairs.push_back(q);
+    }
+  }
   for (int t = 0; t < frames; ++t) {
     // sum_kl tr(Delta_k^T C_kl Delta_l) over the pairs; frame t's 4n x 3 block is contiguous.
     const Eigen::Map<const Eigen::MatrixXd, 0, Eigen::OuterStride<>> frame(
         delta.data() + static_cast<size_t>(3) * t * rows, rows, 3, Eigen::OuterStride<>(rows));
     double ep = 0, en = 0;
-    for (size_t q = 0; q < pairs.size(); ++q) {
+    for (size_t q : active_pairs) {
       const auto [k, l] = pairs[q];
       const Eigen::Matrix<double, 4, 3> dk = frame.block<4, 3>(4 * k, 0);
       const Eigen::Matrix<double, 4, 3> dl = frame.block<4, 3>(4 * l, 0);
@@ -289,65 +315,115 @@ void PreparedMotion::Impl::QuadraticErrors(const MatrixXd& delta, const std::vec
 }
 
 void PreparedMotion::Impl::MaxVertexError(const MatrixXd& delta, LevelErrors& out) const {
-  // Exact maximum of |d_i(t)|, d_i(t) = sum_k w_ik Delta_k(t) [v0_i; 1], over all vertices
+  // Exact maximum of |d_i(t)|, d_i(t) = sum_g w_ig Delta_g(t) [v0_i; 1], over all vertices
   // and frames without evaluating most of them. For a box with center c and half extents
   // h in the bind pose, every vertex v in it has
-  //   |Delta_k [v;1]| <= U(t) = |Delta_k [c;1]| + sum_a |Delta_k(3x3) e_a| h_a,
-  // and |d_i| is at most the largest such bound over i's joints (weights sum to 1).
-  // Frames are visited by decreasing bound, then joints, then each joint's clusters, and
-  // only vertices whose bound beats the best exact value so far are evaluated. Bounds
-  // below kNegligible of the height are not refined: a level that close to exact reports
-  // its maximum to within 1e-5 % of the height (0.001 px on a 10000 px tall character).
+  //   |Delta_g [v;1]| <= U_g(t) = |Delta_g [c;1]| + sum_a |Delta_g(3x3) e_a| h_a,
+  // so a set of vertices whose joints g give them weights of at most W_g has
+  //   |d_i| <= min(max_g U_g, sum_g W_g U_g)
+  // (the first because i's weights sum to 1, the second by the triangle inequality; the
+  // second stays tight for vertices lightly weighted to a joint that moved a lot).
+  // Bounds nest: per frame and vertex group (dominant joint) from the joints' boxes, then
+  // from the group's box, then per cluster; frames and groups are visited by decreasing
+  // bound and only clusters whose bound beats the best exact value so far are evaluated.
+  // Bounds below kNegligible of the height are not refined: a level that close to exact
+  // reports its maximum to within 1e-5 % of the height (0.001 px on a 10000 px tall
+  // character).
   constexpr double kNegligible = 1e-7;
+  // Weights sum to 1 within the validation's tolerance.
+  constexpr double kWeightSum = 1.0 + 1e-3;
   const Character& c = *character;
   const RawSkin& skin = c.skin();
-  const auto& joint_offsets = c.joint_vertex_offsets();
-  const auto& joint_vertices = c.joint_vertices();
-  const auto& joint_clusters = c.joint_cluster_offsets();
-  const auto& cluster_offsets = c.cluster_vertex_offsets();
-  auto box_bound = [](const Affine34d& dk, const Vec3d& center, const Vec3d& half) {
-    return TransformPoint(dk, center).norm() + dk.leftCols<3>().colwise().norm().dot(half);
+  const auto& group_clusters = c.group_cluster_offsets();
+  const auto& group_influence_offsets = c.group_influence_offsets();
+  const auto& group_influences = c.group_influences();
+  const auto& cluster_vertex_offsets = c.cluster_vertex_offsets();
+  const auto& cluster_vertices = c.cluster_vertices();
+  const auto& cluster_influence_offsets = c.cluster_influence_offsets();
+  const auto& cluster_influences = c.cluster_influences();
+  // U_g for a box with center c and half extents h, from the column norms of Delta_g's
+  // 3x3 part (computed once per frame and joint).
+  auto box_bound = [](const Affine34d& dk, const Vec3d& column_norms, const Vec3d& center,
+                      const Vec3d& half) {
+    return TransformPoint(dk, center).norm() + column_norms.dot(half);
   };
-  std::vector<double> bound(static_cast<size_t>(frames) * n, 0.0);
+  // min(max_g U_g, sum_g W_g U_g) over a list of influences, U_g = bound_of(g).
+  auto weighted_bound = [&](const Character::MaxInfluence* begin, const Character::MaxInfluence* end,
+                            auto&& bound_of) {
+    double largest = 0, weighted = 0;
+    for (const Character::MaxInfluence* q = begin; q != end; ++q) {
+      const double u = bound_of(q->joint);
+      largest = std::max(largest, u);
+      weighted += q->weight * u;
+    }
+    return std::min(kWeightSum * largest, weighted);
+  };
+
+  // Coarse bounds for every frame and group from the joints' own boxes (one box bound
+  // per frame and joint); a visited group is refined with its own box.
+  std::vector<Affine34d> frame_delta(n);
+  std::vector<Vec3d> column_norms(static_cast<size_t>(frames) * n);
+  std::vector<double> joint_bound(n);
+  std::vector<double> group_bound(static_cast<size_t>(frames) * n, 0.0);
   std::vector<double> frame_bound(frames, 0.0);
   for (int t = 0; t < frames; ++t) {
+    Vec3d* norms = column_norms.data() + static_cast<size_t>(t) * n;
     for (int k = 0; k < n; ++k) {
-      if (joint_offsets[k] == joint_offsets[k + 1]) continue;
-      const double u = box_bound(DeltaAt(delta, k, t), c.joint_vertex_centers()[k],
+      const Affine34d dk = DeltaAt(delta, k, t);
+      norms[k] = dk.leftCols<3>().colwise().norm().transpose();
+      joint_bound[k] = box_bound(dk, norms[k], c.joint_vertex_centers()[k],
                                  c.joint_vertex_half_extents()[k]);
-      bound[static_cast<size_t>(t) * n + k] = u;
+    }
+    for (int j = 0; j < n; ++j) {
+      if (group_clusters[j] == group_clusters[j + 1]) continue;
+      const double u = weighted_bound(group_influences.data() + group_influence_offsets[j],
+                                      group_influences.data() + group_influence_offsets[j + 1],
+                                      [&](int g) { return joint_bound[g]; });
+      group_bound[static_cast<size_t>(t) * n + j] = u;
       frame_bound[t] = std::max(frame_bound[t], u);
     }
   }
-  std::vector<int> order(frames);
-  std::iota(order.begin(), order.end(), 0);
-  std::sort(order.begin(), order.end(), [&](int a, int b) { return frame_bound[a] > frame_bound[b]; });
+  std::vector<int> frame_order(frames);
+  std::iota(frame_order.begin(), frame_order.end(), 0);
+  std::sort(frame_order.begin(), frame_order.end(),
+            [&](int a, int b) { return frame_bound[a] > frame_bound[b]; });
 
   double best = 0;
   int best_frame = 0, best_vertex = 0;
   const double negligible = kNegligible * c.height();
-  std::vector<int> stamp(c.vertex_count(), -1);
-  std::vector<Affine34d> frame_delta(n);
   // The exact evaluations blend in float (the skin's own precision): twice the throughput,
   // and the figure is a display quantity.
   std::vector<Affine34f> frame_delta_f(n);
-  for (int t : order) {
+  std::vector<int> group_order(n);
+  for (int t : frame_order) {
     if (frame_bound[t] <= std::max(best, negligible)) break;
     for (int k = 0; k < n; ++k) {
       frame_delta[k] = DeltaAt(delta, k, t);
       frame_delta_f[k] = frame_delta[k].cast<float>();
     }
-    for (int k = 0; k < n; ++k) {
-      if (bound[static_cast<size_t>(t) * n + k] <= std::max(best, negligible)) continue;
-      for (uint32_t cluster = joint_clusters[k]; cluster < joint_clusters[k + 1]; ++cluster) {
-        if (box_bound(frame_delta[k], c.cluster_centers()[cluster],
-                      c.cluster_half_extents()[cluster]) <= std::max(best, negligible)) {
-          continue;
-        }
-        for (uint32_t e = cluster_offsets[cluster]; e < cluster_offsets[cluster + 1]; ++e) {
-          const uint32_t i = joint_vertices[e];
-          if (stamp[i] == t) continue;
-          stamp[i] = t;
+    const double* bound = group_bound.data() + static_cast<size_t>(t) * n;
+    const Vec3d* norms = column_norms.data() + static_cast<size_t>(t) * n;
+    std::iota(group_order.begin(), group_order.end(), 0);
+    std::sort(group_order.begin(), group_order.end(), [&](int a, int b) { return bound[a] > bound[b]; });
+    for (int j : group_order) {
+      if (bound[j] <= std::max(best, negligible)) break;
+      const Vec3d& group_center = c.group_centers()[j];
+      const Vec3d& group_half = c.group_half_extents()[j];
+      const double refined = weighted_bound(
+          group_influences.data() + group_influence_offsets[j],
+          group_influences.data() + group_influence_offsets[j + 1],
+          [&](int g) { return box_bound(frame_delta[g], norms[g], group_center, group_half); });
+      if (refined <= std::max(best, negligible)) continue;
+      for (uint32_t cluster = group_clusters[j]; cluster < group_clusters[j + 1]; ++cluster) {
+        const Vec3d& center = c.cluster_centers()[cluster];
+        const Vec3d& half = c.cluster_half_extents()[cluster];
+        const double cluster_bound = weighted_bound(
+            cluster_influences.data() + cluster_influence_offsets[cluster],
+            cluster_influences.data() + cluster_influence_offsets[cluster + 1],
+            [&](int g) { return box_bound(frame_delta[g], norms[g], center, half); });
+        if (cluster_bound <= std::max(best, negligible)) continue;
+        for (uint32_t e = cluster_vertex_offsets[cluster]; e < cluster_vertex_offsets[cluster + 1]; ++e) {
+          const uint32_t i = cluster_vertices[e];
           Affine34f blended = Affine34f::Zero();
           for (uint32_t g = skin.influence_offsets[i]; g < skin.influence_offsets[i + 1]; ++g) {
             blended.noalias() += skin.influence_weights[g] * frame_delta_f[skin.influence_joints[g]];
@@ -371,24 +447,26 @@ void PreparedMotion::Impl::SampledErrors(const MatrixXd& delta, LevelErrors& out
   const RawSkin& skin = character->skin();
   const std::vector<double>& areas = character->vertex_areas();
   double distance_sum = 0, angle_sum = 0;
-  std::vector<Affine34d> frame_delta(n);
+  // Blends in float, as the maximum search: the rounding is relative to Delta itself.
+  std::vector<Affine34f> frame_delta(n);
   for (size_t q = 0; q < sample_frames.size(); ++q) {
     const int t = sample_frames[q];
-    for (int k = 0; k < n; ++k) frame_delta[k] = DeltaAt(delta, k, t);
+    for (int k = 0; k < n; ++k) frame_delta[k] = DeltaAt(delta, k, t).cast<float>();
     for (size_t v = 0; v < sample_vertices.size(); ++v) {
       const int i = sample_vertices[v];
-      const Vec3d v0 = skin.positions[i].cast<double>();
-      const Vec3d n0 = skin.normals[i].cast<double>();
-      Affine34d blended = Affine34d::Zero();
+      Affine34f blended = Affine34f::Zero();
       for (uint32_t g = skin.influence_offsets[i]; g < skin.influence_offsets[i + 1]; ++g) {
         blended.noalias() += skin.influence_weights[g] * frame_delta[skin.influence_joints[g]];
       }
-      const Vec3d d = TransformPoint(blended, v0);
-      const Vec3d dn = TransformDirection(blended, n0);
+      const Vec3d d = TransformPoint(blended, skin.positions[i]).cast<double>();
+      const Vec3d dn = TransformDirection(blended, skin.normals[i]).cast<double>();
       const Vec3d& normal = sample_normals[q * sample_vertices.size() + v];
       const Vec3d reduced = normal + dn;
       distance_sum += areas[i] * d.norm();
-      angle_sum += areas[i] * std::atan2(normal.cross(reduced).norm(), normal.dot(reduced));
+      // The angle from its cosine: one acos instead of atan2 and a cross product.
+      const double norms = std::sqrt(normal.squaredNorm() * reduced.squaredNorm());
+      const double cosine = norms > 0 ? std::clamp(normal.dot(reduced) / norms, -1.0, 1.0) : 1.0;
+      angle_sum += areas[i] * std::acos(cosine);
     }
   }
   const double weight = sample_area * static_cast<double>(sample_frames.size());
@@ -399,10 +477,50 @@ void PreparedMotion::Impl::SampledErrors(const MatrixXd& delta, LevelErrors& out
 namespace {
 
 // The normal equations of one level: G (4m x 4m, lambda included), B (4m x 3T) and
-// their solution X.
+// their solution X. B is kept transposed (see SolveSpd).
 struct LevelSystem {
-  MatrixXd g, b, x;
+  MatrixXd g, bt, x;
 };
+
+// Solves A X = B for a sparse symmetric positive definite A (dim x dim) and many
+// right-hand sides, given and returned transposed: xt = B^T on entry (cols x dim), X^T on
+// return. Eigen's SimplicialLLT::solve walks the factor once per right-hand side with
+// scalar updates; here each entry of the factor updates a whole column of xt at once
+// (contiguous, vectorised), the same arithmetic in another order.
+Status SolveSpdTransposed(const SparseMatrixd& a, MatrixXd& xt) {
+  const Eigen::SimplicialLLT<SparseMatrixd, Eigen::Lower, Eigen::AMDOrdering<int>> llt(a);
+  if (llt.info() != Eigen::Success) {
+    return Status(StatusCode::kInternal, "SolveLevel: a normal matrix is not positive definite");
+  }
+  const int dim = static_cast<int>(a.rows());
+  // y = P b: row i of b goes to row indices(i) of y.
+  const auto& permutation = llt.permutationP().indices();
+  MatrixXd yt(xt.rows(), dim);
+  for (int i = 0; i < dim; ++i) yt.col(permutation[i]) = xt.col(i);
+  // L is stored column-major in the lower triangle with its diagonal.
+  const SparseMatrixd& l = llt.matrixL().nestedExpression();
+  std::vector<double> diagonal(dim);
+  for (int j = 0; j < dim; ++j) {
+    for (SparseMatrixd::InnerIterator it(l, j); it; ++it) {
+      if (it.row() == j) diagonal[j] = it.value();
+    }
+  }
+  for (int j = 0; j < dim; ++j) {  // L z = y
+    yt.col(j) /= diagonal[j];
+    for (SparseMatrixd::InnerIterator it(l, j); it; ++it) {
+      if (it.row() > j) yt.col(it.row()) -= it.value() * yt.col(j);
+    }
+  }
+  for (int j = dim - 1; j >= 0; --j) {  // L^T w = z
+    for (SparseMatrixd::InnerIterator it(l, j); it; ++it) {
+      if (it.row() > j) yt.col(j) -= it.value() * yt.col(it.row());
+    }
+    yt.col(j) /= diagonal[j];
+  }
+  // x = P^-1 w: row i of x is row indices(i) of w.
+  for (int i = 0; i < dim; ++i) xt.col(i) = yt.col(permutation[i]);
+  return Status::Ok();
+}
 
 Status ValidateLevel(const ReducedSkeleton& level, int n) {
   const int m = level.kept_count();
@@ -422,6 +540,19 @@ Status ValidateLevel(const ReducedSkeleton& level, int n) {
     }
   }
   return Status::Ok();
+}
+
+// Whether every 3x3 block of x (4m x 3T, one 4x3 block per kept joint and frame) is a
+// rotation to within rounding, |R^T R - I|_F <= 1e-12.
+bool AllRotations(const MatrixXd& x) {
+  for (Eigen::Index t = 0; t < x.cols(); t += 3) {
+    for (Eigen::Index s = 0; s < x.rows(); s += 4) {
+      const Eigen::Matrix3d r = x.block<3, 3>(s, t);
+      const double error_squared = (r.transpose() * r - Eigen::Matrix3d::Identity()).squaredNorm();
+      if (error_squared > 1e-24 || !(r.determinant() > 0)) return false;
+    }
+  }
+  return true;
 }
 
 StatusOr<LevelSystem> SolveSystem(const PreparedMotion::Impl& d, const ReducedSkeleton& level) {
@@ -448,14 +579,14 @@ StatusOr<LevelSystem> SolveSystem(const PreparedMotion::Impl& d, const ReducedSk
   const double lambda = d.settings.regularization * (trace > 0 ? trace / dim : 1.0);
   g.diagonal().array() += lambda;
 
-  // B = P F + S (J + lambda I) Kt.
-  MatrixXd& b = system.b;
-  b = MatrixXd::Zero(dim, cols);
-  for (int k = 0; k < n; ++k) b.middleRows(4 * phi[k], 4) += d.f.middleRows(4 * k, 4);
+  // B^T = (P F + S (J + lambda I) Kt)^T.
+  MatrixXd& bt = system.bt;
+  bt = MatrixXd::Zero(cols, dim);
+  for (int k = 0; k < n; ++k) bt.middleCols(4 * phi[k], 4) += d.ft.middleCols(4 * k, 4);
   for (int s = 0; s < m; ++s) {
     const int j = level.kept_joints[s];
-    b.middleRows(4 * s, 4).noalias() +=
-        (d.joint_fit[j] + lambda * Eigen::Matrix4d::Identity()) * d.kt.middleRows(4 * j, 4);
+    bt.middleCols(4 * s, 4).noalias() +=
+        d.ktt.middleCols(4 * j, 4) * (d.joint_fit[j] + lambda * Eigen::Matrix4d::Identity());
   }
 
   if (m == n) {
@@ -467,12 +598,9 @@ StatusOr<LevelSystem> SolveSystem(const PreparedMotion::Impl& d, const ReducedSk
   // G is block-sparse (kept joints that share vertices) and nearly a tree: a sparse
   // Cholesky with a fill-reducing ordering solves the 3T right-hand sides in time nearly
   // linear in m instead of quadratic.
-  const SparseMatrixd g_sparse = g.sparseView();
-  const Eigen::SimplicialLLT<SparseMatrixd, Eigen::Lower, Eigen::AMDOrdering<int>> llt(g_sparse);
-  if (llt.info() != Eigen::Success) {
-    return Status(StatusCode::kInternal, "SolveLevel: the normal matrix is not positive definite");
-  }
-  system.x = llt.solve(b);
+  MatrixXd xt = bt;
+  if (Status status = SolveSpdTransposed(g.sparseView(), xt); !status.ok()) return status;
+  system.x = xt.transpose();
   return system;
 }
 
@@ -493,10 +621,13 @@ StatusOr<LevelResult> PreparedMotion::SolveLevel(const ReducedSkeleton& level, D
   const int cols = 3 * d.frames;
   const std::vector<int>& phi = level.joint_to_slot;
   const MatrixXd& g = system->g;
-  const MatrixXd& b = system->b;
+  const MatrixXd& bt = system->bt;
   MatrixXd& x = system->x;
 
-  if (IsRigid(d.settings.variant)) {
+  // With every joint kept, original matrices that are rotations already (to within
+  // rounding) are the constrained minimiser too (no residual): keep them bit for bit, as
+  // the fitted variants do, instead of projecting and re-solving them.
+  if (IsRigid(d.settings.variant) && !(m == n && AllRotations(x))) {
     for (int t = 0; t < d.frames; ++t) {
       for (int s = 0; s < m; ++s) {
         const Eigen::Matrix3d a = x.block<3, 3>(4 * s, 3 * t).transpose();
@@ -505,31 +636,30 @@ StatusOr<LevelResult> PreparedMotion::SolveLevel(const ReducedSkeleton& level, D
     }
     if (d.settings.resolve_rigid_translation) {
       // x_T = G_TT^-1 (b_T - G_TN x_N): translations are rows 4s+3, the rest is fixed.
-      // G_TT and G_TN keep G's block sparsity, so both products stay sparse.
-      std::vector<Eigen::Triplet<double>> tt, tn;
+      // Transposed, as SolveSpdTransposed takes it: x_T^T = (b_T^T - x_N^T G_TN^T) G_TT^-1.
+      // G_TT and G_TN keep G's block sparsity: G_TT is factored sparse, and each nonzero
+      // of G_TN subtracts one contiguous column of all frames (as for F in Create: a
+      // sparse-dense product updates one coefficient at a time).
+      MatrixXd x_nt(cols, 3 * m);
       for (int s = 0; s < m; ++s) {
+        for (int r = 0; r < 3; ++r) x_nt.col(3 * s + r) = x.row(4 * s + r).transpose();
+      }
+      std::vector<Eigen::Triplet<double>> tt;
+      MatrixXd x_tt(cols, m);
+      for (int s = 0; s < m; ++s) {
+        x_tt.col(s) = bt.col(4 * s + 3);
         for (int u = 0; u < m; ++u) {
           if (g(4 * s + 3, 4 * u + 3) != 0) tt.emplace_back(s, u, g(4 * s + 3, 4 * u + 3));
           for (int r = 0; r < 3; ++r) {
-            if (g(4 * s + 3, 4 * u + r) != 0) tn.emplace_back(s, 3 * u + r, g(4 * s + 3, 4 * u + r));
+            const double g_tn = g(4 * s + 3, 4 * u + r);
+            if (g_tn != 0) x_tt.col(s).noalias() -= g_tn * x_nt.col(3 * u + r);
           }
         }
       }
-      SparseMatrixd g_tt(m, m), g_tn(m, 3 * m);
+      SparseMatrixd g_tt(m, m);
       g_tt.setFromTriplets(tt.begin(), tt.end());
-      g_tn.setFromTriplets(tn.begin(), tn.end());
-      MatrixXd b_t(m, cols), x_n(3 * m, cols);
-      for (int s = 0; s < m; ++s) {
-        b_t.row(s) = b.row(4 * s + 3);
-        for (int r = 0; r < 3; ++r) x_n.row(3 * s + r) = x.row(4 * s + r);
-      }
-      b_t -= g_tn * x_n;
-      const Eigen::SimplicialLLT<SparseMatrixd, Eigen::Lower, Eigen::AMDOrdering<int>> llt_tt(g_tt);
-      if (llt_tt.info() != Eigen::Success) {
-        return Status(StatusCode::kInternal, "SolveLevel: the translation block is not positive definite");
-      }
-      const MatrixXd x_t = llt_tt.solve(b_t);
-      for (int s = 0; s < m; ++s) x.row(4 * s + 3) = x_t.row(s);
+      if (Status status = SolveSpdTransposed(g_tt, x_tt); !status.ok()) return status;
+      for (int s = 0; s < m; ++s) x.row(4 * s + 3) = x_tt.col(s).transpose();
     }
   }
 

@@ -331,7 +331,9 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
   report_progress(0.98, "measure");
   const ReportInputs report_inputs{request,       character, motion, *ranking, **prepared,
                                    counts,        solved,    curves,  bake_seconds,
-                                   SkinningPassSeconds(character, motion, threads),
+                                   request.measure_skinning_pass
+                                       ? SkinningPassSeconds(character, motion, threads)
+                                       : 0.0,
                                    threads,       inputs->warnings};
 
   BakeOutput output;

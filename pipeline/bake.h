@@ -41,6 +41,10 @@ struct BakeRequest {
   // Also solve the four variants at every level (errors only) for the fig. 7 plot.
   bool variant_curves = false;
   int threads = 0;  // 0 = one per hardware thread
+  // Time one plain skinning pass after the bake for the report's
+  // timing.skinning_pass_seconds and bake_over_skinning_pass (both 0 when false): it
+  // costs a sixth to a third of the bake again, outside bake_seconds.
+  bool measure_skinning_pass = true;
   std::array<uint8_t, 32> source_hash{};  // SHA-256 of the inputs, stored in the level set
   std::string character_label, motion_label;  // for the report (file names)
 

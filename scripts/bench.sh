@@ -43,8 +43,14 @@ cmake --build "$build" --target motionlod_bench_bake -j "$(nproc 2>/dev/null || 
 
 # The tree being measured (HEAD may move while a long run goes on).
 commit="$(git rev-parse --short HEAD 2>/dev/null || echo unknown)"
-if [ -n "$(git status --porcelain --untracked-files=no 2>/dev/null)" ]; then
-  commit="$commit+uncommitted($(git status --porcelain --untracked-files=no | awk '{print $2}' | tr '\n' ' ' | sed 's/ $//'))"
+changed="$(git status --porcelain --untracked-files=no 2>/dev/null | awk '{print $2}')"
+if [ -n "$changed" ]; then
+  count=$(printf '%s\n' "$changed" | wc -l)
+  if [ "$count" -le 5 ]; then
+    commit="$commit+uncommitted($(printf '%s\n' "$changed" | tr '\n' ' ' | sed 's/ $//'))"
+  else
+    commit="$commit+uncommitted($count files)"
+  fi
 fi
 
 name=bench-results

@@ -1,6 +1,8 @@
 #include "core/character.h"
 
+#include <algorithm>
 #include <cmath>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -63,6 +65,56 @@ TEST(BuildCharacter, ChildlessJointWithSkinEndsAtItsFarthestVertex) {
 }
 
 RawCharacter Valid() { return MakeCreature(4, 1); }
+
+TEST(BuildCharacter, ClustersPartitionTheSkinAndBoundTheirVerticesAndWeights) {
+  // More segments than one cluster holds, so groups split.
+  auto built = BuildCharacter(MakeCreature(16, 6));
+  ASSERT_TRUE(built.ok()) << built.status().ToString();
+  const Character& c = **built;
+  const RawSkin& skin = c.skin();
+  const int n = c.joint_count();
+  ASSERT_EQ(c.group_cluster_offsets().size(), static_cast<size_t>(n + 1));
+  const auto& vertex_offsets = c.cluster_vertex_offsets();
+  const size_t clusters = c.cluster_centers().size();
+  ASSERT_EQ(vertex_offsets.size(), clusters + 1);
+  ASSERT_EQ(c.cluster_influence_offsets().size(), clusters + 1);
+  EXPECT_EQ(c.group_cluster_offsets().back(), clusters);
+  EXPECT_GT(clusters, static_cast<size_t>(n));
+  std::vector<int> seen(c.vertex_count(), 0);
+  for (int group = 0; group < n; ++group) {
+    for (uint32_t cluster = c.group_cluster_offsets()[group]; cluster < c.group_cluster_offsets()[group + 1];
+         ++cluster) {
+      const uint32_t size = vertex_offsets[cluster + 1] - vertex_offsets[cluster];
+      EXPECT_GE(size, 1u);
+      EXPECT_LE(size, static_cast<uint32_t>(Character::kMaxClusterVertices));
+      // Each joint weighting a vertex of the cluster is listed with at least that weight,
+      // and the largest weight is attained.
+      std::vector<float> largest(n, 0.0f);
+      for (uint32_t e = vertex_offsets[cluster]; e < vertex_offsets[cluster + 1]; ++e) {
+        const uint32_t i = c.cluster_vertices()[e];
+        ++seen[i];
+        const Vec3d offset = skin.positions[i].cast<double>() - c.cluster_centers()[cluster];
+        EXPECT_TRUE((offset.cwiseAbs().array() <= c.cluster_half_extents()[cluster].array() + 1e-9).all());
+        float dominant_weight = 0;
+        int dominant = -1;
+        for (uint32_t g = skin.influence_offsets[i]; g < skin.influence_offsets[i + 1]; ++g) {
+          largest[skin.influence_joints[g]] = std::max(largest[skin.influence_joints[g]], skin.influence_weights[g]);
+          if (skin.influence_weights[g] > dominant_weight) {
+            dominant_weight = skin.influence_weights[g];
+            dominant = skin.influence_joints[g];
+          }
+        }
+        EXPECT_EQ(dominant, group) << "vertex " << i;
+      }
+      std::vector<float> listed(n, 0.0f);
+      for (uint32_t q = c.cluster_influence_offsets()[cluster]; q < c.cluster_influence_offsets()[cluster + 1]; ++q) {
+        listed[c.cluster_influences()[q].joint] = c.cluster_influences()[q].weight;
+      }
+      EXPECT_EQ(listed, largest) << "cluster " << cluster;
+    }
+  }
+  for (int i = 0; i < c.vertex_count(); ++i) EXPECT_EQ(seen[i], 1) << "vertex " << i;
+}
 
 TEST(ValidateRawCharacter, RejectsEachInvalidField) {
   struct Case {

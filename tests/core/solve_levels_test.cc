@@ -100,6 +100,38 @@ TEST(SolveLevel, ReproducesTheOriginalWhenNoJointIsRemoved) {
   }
 }
 
+TEST(SolveLevel, RigidFullLevelKeepsRotationsExactlyAndProjectsScaledJoints) {
+  Scene s = MakeScene();
+  const int n = s.character->joint_count();
+  for (Variant variant : {Variant::kVPPD, Variant::kVPNOPD}) {
+    // Every K_j(t) of the wave motion is a rotation: the full level is the original, bit
+    // for bit, with no error at all (not an error at the level of rounding).
+    const auto prepared = Prepare(s, variant);
+    const LevelResult result = Solve(*prepared, s, n);
+    EXPECT_EQ(result.optimized.mean_e, 0.0) << VariantName(variant);
+    EXPECT_EQ(result.optimized.max_vertex_error_pct, 0.0) << VariantName(variant);
+    const Eigen::MatrixXd& kt = prepared->original_matrices();
+    for (int t = 0; t < s.motion.frame_count; ++t) {
+      for (int j = 0; j < n; ++j) {
+        const Affine34f original = kt.block<4, 3>(4 * j, 3 * t).transpose().cast<float>();
+        EXPECT_EQ(result.matrices[t * n + j], original) << t << " " << j;
+      }
+    }
+  }
+  // A joint scaled by 1.2 in every frame is no rotation: the rigid full level projects it
+  // and pays for it, so the shortcut above must not apply.
+  const int scaled = n - 1;
+  for (int t = 0; t < s.motion.frame_count; ++t) {
+    s.motion.joint_world[static_cast<size_t>(t) * n + scaled].leftCols<3>() *= 1.2;
+  }
+  const LevelResult result = Solve(*Prepare(s, Variant::kVPNOPD), s, n);
+  EXPECT_GT(result.optimized.mean_e, 0.0);
+  for (int t = 0; t < s.motion.frame_count; ++t) {
+    const Eigen::Matrix3d r = result.matrices[t * n + scaled].leftCols<3>().cast<double>();
+    EXPECT_NEAR((r.transpose() * r - Eigen::Matrix3d::Identity()).norm(), 0, 1e-6) << t;
+  }
+}
+
 TEST(SolveLevel, LeastSquaresVariantsNeverLoseToTheBaseline) {
   const Scene s = MakeScene();
   const auto vpno = Prepare(s, Variant::kVPNO);

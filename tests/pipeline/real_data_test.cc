@@ -1,4 +1,5 @@
 // The method's guarantees on real characters and motions from ../shared/data.
+#include <algorithm>
 #include <filesystem>
 #include <string>
 
@@ -161,6 +162,76 @@ TEST_F(RealData, RigidVariantsStoreRotationsAndReSolvedTranslationHelps) {
     }
     const auto r_keep = kept_t->SolveLevel(Level(s, kept));
     EXPECT_LE(r->optimized.mean_e, r_keep->optimized.mean_e * (1 + 1e-9)) << kept;
+  }
+}
+
+// The maximum vertex error search prunes with per-cluster bounds; on real weights
+// (many influences per vertex, some tiny) it must still find the exact maximum of the
+// optimised and the baseline skin over every vertex and frame.
+TEST_F(RealData, MaxVertexErrorEqualsBruteForce) {
+  for (const char* file : {"characters/stormtrooper.dae", "characters/Orc.gltf",
+                           "characters/CesiumMan.glb", "motions/cmu_131_01.bvh"}) {
+    const RealScene s = Load(file, 0, 40);
+    const core::Character& c = *s.inputs.character;
+    const int n = c.joint_count();
+    const core::RawSkin& skin = c.skin();
+    for (core::Variant variant : {core::Variant::kVP, core::Variant::kVPNOPD}) {
+      const auto prepared = Prepare(s, variant);
+      const Eigen::MatrixXd& kt = prepared->original_matrices();
+      auto original = [&](int joint, int t) -> core::Affine34d {
+        return kt.block<4, 3>(4 * joint, 3 * t).transpose();
+      };
+      for (int kept : {n - 1, n / 2, n / 4, 2}) {
+        const auto result = prepared->SolveLevel(Level(s, kept));
+        ASSERT_TRUE(result.ok());
+        const core::ReducedSkeleton& level = result->skeleton;
+        const auto reduced = core::ReduceInfluences(skin, level);
+        double optimized = 0, baseline = 0;
+        for (int t = 0; t < s.inputs.motion.frame_count; ++t) {
+          for (int i = 0; i < c.vertex_count(); ++i) {
+            const core::Vec3d v0 = skin.positions[i].cast<double>();
+            core::Vec3d reference = core::Vec3d::Zero(), unoptimized = core::Vec3d::Zero();
+            for (uint32_t e = skin.influence_offsets[i]; e < skin.influence_offsets[i + 1]; ++e) {
+              const int joint = skin.influence_joints[e];
+              reference += skin.influence_weights[e] * core::TransformPoint(original(joint, t), v0);
+              const int ancestor = level.kept_joints[level.joint_to_slot[joint]];
+              unoptimized += skin.influence_weights[e] * core::TransformPoint(original(ancestor, t), v0);
+            }
+            core::Vec3d lod = core::Vec3d::Zero();
+            for (uint32_t e = reduced.offsets[i]; e < reduced.offsets[i + 1]; ++e) {
+              const core::Affine34d k = result->matrices[t * kept + reduced.slots[e]].cast<double>();
+              lod += reduced.weights[e] * core::TransformPoint(k, v0);
+            }
+            optimized = std::max(optimized, (reference - lod).norm());
+            baseline = std::max(baseline, (reference - unoptimized).norm());
+          }
+        }
+        const std::string where = std::string(file) + " " + core::VariantName(variant) + " kept " +
+                                  std::to_string(kept);
+        EXPECT_NEAR(result->optimized.max_vertex_error_pct, 100 * optimized / c.height(),
+                    1e-4 + 1e-5 * result->optimized.max_vertex_error_pct) << where;
+        EXPECT_NEAR(result->baseline.max_vertex_error_pct, 100 * baseline / c.height(),
+                    1e-4 + 1e-5 * result->baseline.max_vertex_error_pct) << where;
+      }
+    }
+  }
+}
+
+TEST_F(RealData, TheReportTimesASkinningPassOnlyWhenAsked) {
+  auto asset = io::LoadAssetFile(DataPath("characters/Fox.glb"));
+  ASSERT_TRUE(asset.ok());
+  BakeRequest request;
+  request.character = *asset;
+  request.levels = {12};
+  request.threads = 1;
+  for (bool measure : {true, false}) {
+    request.measure_skinning_pass = measure;
+    auto output = Bake(request);
+    ASSERT_TRUE(output.ok()) << output.status().ToString();
+    const nlohmann::json& timing = output->report["timing"];
+    EXPECT_GT(timing["bake_seconds"].get<double>(), 0);
+    EXPECT_EQ(timing["skinning_pass_seconds"].get<double>() > 0, measure);
+    EXPECT_EQ(timing["bake_over_skinning_pass"].get<double>() > 0, measure);
   }
 }
 
