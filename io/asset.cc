@@ -8,6 +8,7 @@
 #include <system_error>
 #include <utility>
 
+#include "io/asset_impl.h"
 #include "io/assimp_scene.h"
 #include "io/clips.h"
 #include "io/format.h"
@@ -15,20 +16,6 @@
 #include "io/text.h"
 
 namespace motionlod::io {
-
-struct Asset::Impl {
-  Rig rig;
-  std::vector<SceneNode> nodes;
-  std::vector<Clip> clips;
-  std::vector<AnimationInfo> infos;
-  std::vector<std::string> warnings;
-};
-
-struct AssetFactory {
-  static std::shared_ptr<const Asset> Make(std::unique_ptr<Asset::Impl> impl) {
-    return std::shared_ptr<const Asset>(new Asset(std::move(impl)));
-  }
-};
 
 namespace {
 

@@ -89,7 +89,7 @@ class Asset {
   struct Impl;
 
  private:
-  friend struct AssetFactory;  // the importer, in asset.cc
+  friend struct AssetFactory;  // the importer and the worker reply decoder (asset_impl.h)
   explicit Asset(std::unique_ptr<Impl> impl);
   std::unique_ptr<Impl> impl_;
 };

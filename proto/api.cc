@@ -18,6 +18,16 @@ json OptionalNumber(const std::optional<double>& value) {
 
 json OptionalText(const std::string& text) { return text.empty() ? json(nullptr) : json(text); }
 
+// Readers of optional fields: absent and null keep the default.
+template <typename T>
+void ReadOptional(const json& j, const char* key, T& out) {
+  if (const auto it = j.find(key); it != j.end() && !it->is_null()) it->get_to(out);
+}
+
+void ReadOptional(const json& j, const char* key, std::optional<double>& out) {
+  if (const auto it = j.find(key); it != j.end() && !it->is_null()) out = it->get<double>();
+}
+
 }  // namespace
 
 bool IsContentId(std::string_view text) {
@@ -218,6 +228,119 @@ void to_json(json& j, const LevelChoice& v) {
 void to_json(json& j, const Problem& v) {
   j = json{{"type", v.type},     {"title", v.title},       {"status", v.status},
            {"detail", v.detail}, {"instance", v.instance}, {"request_id", v.request_id}};
+}
+
+void from_json(const json& j, FileInfo& v) {
+  j.at("name").get_to(v.name);
+  j.at("sha256").get_to(v.sha256);
+  j.at("size").get_to(v.size);
+}
+
+void from_json(const json& j, MotionInfo& v) {
+  j.at("id").get_to(v.id);
+  j.at("character").get_to(v.character);
+  j.at("animation").get_to(v.animation);
+  j.at("source").get_to(v.source);
+  ReadOptional(j, "files", v.files);
+  ReadOptional(j, "duration_seconds", v.duration_seconds);
+  ReadOptional(j, "source_fps", v.source_fps);
+  ReadOptional(j, "frames", v.frames);
+  ReadOptional(j, "warnings", v.warnings);
+}
+
+void from_json(const json& j, CharacterInfo& v) {
+  j.at("id").get_to(v.id);
+  j.at("name").get_to(v.name);
+  ReadOptional(j, "files", v.files);
+  j.at("joints").get_to(v.joints);
+  ReadOptional(j, "vertices", v.vertices);
+  ReadOptional(j, "triangles", v.triangles);
+  ReadOptional(j, "proxy_skin", v.proxy_skin);
+  ReadOptional(j, "joint_names", v.joint_names);
+  ReadOptional(j, "animations", v.animations);
+  ReadOptional(j, "warnings", v.warnings);
+  ReadOptional(j, "created_at", v.created_at);
+}
+
+void from_json(const json& j, BakeRequest& v) {
+  j.at("character").get_to(v.character);
+  ReadOptional(j, "motion", v.motion);
+  ReadOptional(j, "levels", v.levels);
+  ReadOptional(j, "all_levels", v.all_levels);
+  ReadOptional(j, "variant", v.variant);
+  ReadOptional(j, "fps", v.fps);
+  ReadOptional(j, "locked_joints", v.locked_joints);
+  ReadOptional(j, "keep_pd_translation", v.keep_pd_translation);
+}
+
+void from_json(const json& j, JobStatus& v) {
+  j.at("id").get_to(v.id);
+  j.at("bake").get_to(v.bake);
+  j.at("state").get_to(v.state);
+  ReadOptional(j, "progress", v.progress);
+  ReadOptional(j, "stage", v.stage);
+  if (const auto error = j.find("error"); error != j.end() && !error->is_null()) {
+    v.error = JobError{error->at("code").get<std::string>(), error->at("detail").get<std::string>()};
+  }
+  ReadOptional(j, "attempts", v.attempts);
+  ReadOptional(j, "version", v.version);
+  ReadOptional(j, "created_at", v.created_at);
+  ReadOptional(j, "started_at", v.started_at);
+  ReadOptional(j, "finished_at", v.finished_at);
+}
+
+void from_json(const json& j, LevelEntry& v) {
+  j.at("index").get_to(v.index);
+  j.at("joints").get_to(v.joints);
+  j.at("max_vertex_error_pct").get_to(v.max_vertex_error_pct);
+  ReadOptional(j, "mean_vertex_error_pct", v.mean_vertex_error_pct);
+  ReadOptional(j, "mean_normal_error_deg", v.mean_normal_error_deg);
+  ReadOptional(j, "mean_E", v.mean_e);
+  ReadOptional(j, "max_px_for_1px_error", v.max_px_for_1px_error);
+  ReadOptional(j, "chosen", v.chosen);
+  ReadOptional(j, "px_min", v.px_min);
+  ReadOptional(j, "px_max", v.px_max);
+  j.at("hash").get_to(v.hash);
+  ReadOptional(j, "bytes", v.bytes);
+}
+
+void from_json(const json& j, BakeInfo& v) {
+  j.at("id").get_to(v.id);
+  j.at("character").get_to(v.character);
+  ReadOptional(j, "motion", v.motion);
+  ReadOptional(j, "animation", v.animation);
+  ReadOptional(j, "request", v.request);
+  j.at("state").get_to(v.state);
+  ReadOptional(j, "frames", v.frames);
+  ReadOptional(j, "fps", v.fps);
+  ReadOptional(j, "variant", v.variant);
+  ReadOptional(j, "level_set", v.level_set);
+  ReadOptional(j, "level_set_bytes", v.level_set_bytes);
+  ReadOptional(j, "levels", v.levels);
+  ReadOptional(j, "created_at", v.created_at);
+}
+
+void from_json(const json& j, LevelChoice& v) {
+  j.at("bake").get_to(v.bake);
+  j.at("px").get_to(v.px);
+  ReadOptional(j, "budget_px", v.budget_px);
+  j.at("index").get_to(v.index);
+  j.at("joints").get_to(v.joints);
+  ReadOptional(j, "max_vertex_error_pct", v.max_vertex_error_pct);
+  ReadOptional(j, "error_px", v.error_px);
+  ReadOptional(j, "within_budget", v.within_budget);
+  j.at("hash").get_to(v.hash);
+  ReadOptional(j, "url", v.url);
+  ReadOptional(j, "bytes", v.bytes);
+}
+
+void from_json(const json& j, Problem& v) {
+  ReadOptional(j, "type", v.type);
+  ReadOptional(j, "title", v.title);
+  ReadOptional(j, "status", v.status);
+  ReadOptional(j, "detail", v.detail);
+  ReadOptional(j, "instance", v.instance);
+  ReadOptional(j, "request_id", v.request_id);
 }
 
 }  // namespace motionlod::proto::api

@@ -1,4 +1,4 @@
-// The JSON wire contract of motionlodd (the HTTP daemon) and its future thin client: the
+// The JSON wire contract of motionlodd (the HTTP daemon) and its thin client (client/): the
 // bodies of /v1 requests and responses. proto/openapi.yaml describes the same shapes; the
 // daemon serves it at /v1/openapi.yaml. No Eigen, no core: plain data, JSON conversion and
 // the validation of what a client sends.
@@ -167,5 +167,31 @@ void to_json(nlohmann::json& j, const LevelEntry& v);
 void to_json(nlohmann::json& j, const BakeInfo& v);
 void to_json(nlohmann::json& j, const LevelChoice& v);
 void to_json(nlohmann::json& j, const Problem& v);
+
+// The reverse, for clients reading the daemon's replies. Absent or null optional fields
+// keep their defaults; a required field missing or of the wrong type throws
+// nlohmann::json::exception, which ParseReply turns into a Status.
+void from_json(const nlohmann::json& j, FileInfo& v);
+void from_json(const nlohmann::json& j, MotionInfo& v);
+void from_json(const nlohmann::json& j, CharacterInfo& v);
+void from_json(const nlohmann::json& j, BakeRequest& v);
+void from_json(const nlohmann::json& j, JobStatus& v);
+void from_json(const nlohmann::json& j, LevelEntry& v);
+void from_json(const nlohmann::json& j, BakeInfo& v);
+void from_json(const nlohmann::json& j, LevelChoice& v);
+void from_json(const nlohmann::json& j, Problem& v);
+
+// One reply body as T (any of the DTOs above); kDataLoss naming the field when the body
+// is not JSON or does not have T's shape. Never throws.
+template <typename T>
+StatusOr<T> ParseReply(std::string_view json_text) {
+  const nlohmann::json body = nlohmann::json::parse(json_text, nullptr, /*allow_exceptions=*/false);
+  if (body.is_discarded()) return DataLoss("the reply is not valid JSON");
+  try {
+    return body.get<T>();
+  } catch (const nlohmann::json::exception& error) {
+    return DataLoss(std::string("the reply does not have the expected shape: ") + error.what());
+  }
+}
 
 }  // namespace motionlod::proto::api

@@ -31,5 +31,13 @@ if [ -n "$httplib_files" ] && [ "$httplib_files" != "server/http_server.cc " ]; 
   status=1
 fi
 forbid server 'tools/|client/' "the tools or the client"
+# The thin client needs proto/ and base/ only, and keeps cpp-httplib behind one file.
+forbid client 'Eigen|core/|io/|pipeline/|tools/|server/|spdlog|assimp' \
+  "Eigen, the core, io, the pipeline, the tools, the server, logging or Assimp"
+client_httplib_files=$(grep -RlE '^#include [<"]httplib\.h' client 2>/dev/null | sort | tr '\n' ' ')
+if [ -n "$client_httplib_files" ] && [ "$client_httplib_files" != "client/http_connection.cc " ]; then
+  echo "layering: only client/http_connection.cc may include httplib.h, found: $client_httplib_files"
+  status=1
+fi
 [ $status -eq 0 ] && echo "layering: ok"
 exit $status

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
-# The README's run command: install what is missing, build, and start motionlodd on
-# http://127.0.0.1:${PORT:-8080} with the embedded CC0 sample character uploaded and baked;
-# it prints the URLs and the level table, and serves until Ctrl-C (SIGINT drains).
+# The README's run command: install what is missing, build (the web viewer too, by
+# setup.sh), and start motionlodd on http://127.0.0.1:${PORT:-8080} with the embedded CC0
+# sample character uploaded and baked; it prints the viewer's URL ("web viewer: ..."),
+# the other URLs and the level table, and serves until Ctrl-C (SIGINT drains).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh

@@ -30,6 +30,7 @@ const std::vector<OptionSpec>& Specs() {
       {"server", "bind", &Config::bind, "address to listen on (0.0.0.0: every interface)"},
       {"server", "port", &Config::port, "TCP port; 0 picks a free one"},
       {"server", "http_threads", &Config::http_threads, "connection threads"},
+      {"server", "web_root", &Config::web_root, "built web viewer served at / (empty: none)"},
       {"storage", "data_dir", &Config::data_dir, "database and content-addressed blobs"},
       {"jobs", "threads", &Config::threads, "bake workers (0: one per hardware thread)"},
       {"jobs", "bake_threads", &Config::bake_threads,
@@ -57,6 +58,16 @@ const std::vector<OptionSpec>& Specs() {
        "requests per connection"},
       {"timeouts", "upload_timeout_seconds", &Config::upload_timeout_seconds,
        "one whole request body"},
+      {"import", "import_isolation", &Config::import_isolation,
+       "importer sandbox: auto, bwrap or process"},
+      {"import", "import_worker", &Config::import_worker,
+       "import worker executable (default: next to motionlodd)"},
+      {"import", "import_memory_bytes", &Config::import_memory_bytes,
+       "import worker address space (0: unlimited)"},
+      {"import", "import_cpu_seconds", &Config::import_cpu_seconds, "import worker CPU time"},
+      {"import", "import_timeout_seconds", &Config::import_timeout_seconds,
+       "import worker wall-clock time"},
+      {"import", "import_output_bytes", &Config::import_output_bytes, "import worker reply size"},
       {"auth", "write_keys", &Config::write_keys,
        "bearer keys for writes (comma-separated in env and flags)"},
       {"auth", "read_keys", &Config::read_keys,
@@ -216,6 +227,14 @@ Status Config::Validate() const {
   }
   if (keep_alive_max_requests < 1)
     return InvalidArgument("keep_alive_max_requests must be at least 1");
+  if (import_isolation != "auto" && import_isolation != "bwrap" && import_isolation != "process")
+    return InvalidArgument("import_isolation must be auto, bwrap or process");
+  if (import_memory_bytes < 0) return InvalidArgument("import_memory_bytes must be >= 0");
+  if (!(import_cpu_seconds >= 1 && import_cpu_seconds <= 86400))
+    return InvalidArgument("import_cpu_seconds must be in [1, 86400]");
+  if (!(import_timeout_seconds > 0 && import_timeout_seconds <= 86400))
+    return InvalidArgument("import_timeout_seconds must be in (0, 86400]");
+  if (import_output_bytes < 1) return InvalidArgument("import_output_bytes must be positive");
   for (const auto* keys : {&write_keys, &read_keys}) {
     for (const std::string& key : *keys) {
       if (key.size() < 16) return InvalidArgument("API keys must have at least 16 characters");
@@ -252,7 +271,7 @@ Status ApplyToml(std::string_view toml_text, std::string_view source_name, Confi
       return InvalidArgument(std::string(source_name) + ": unknown section or top-level key '" +
                              section +
                              "' (sections: server, storage, jobs, cache, limits, "
-                             "timeouts, auth, log)");
+                             "timeouts, import, auth, log)");
     }
     for (const auto& [key, node] : *table) {
       const std::string name(key.str());

@@ -19,6 +19,10 @@ struct Config {
   std::string bind = "127.0.0.1";
   int port = 8080;  // 0: any free port (logged, and printed as "listening on http://HOST:PORT")
   int http_threads = 64;  // connection threads; each open keep-alive connection holds one
+  // The built web viewer (web/dist, made by scripts/setup.sh), served at "/"; relative to
+  // the working directory. Empty, or a directory without index.html: "/" says how to
+  // build it, and the API is unaffected.
+  std::string web_root = "web/dist";
 
   // Storage.
   std::string data_dir = "motionlodd-data";
@@ -50,6 +54,14 @@ struct Config {
   int keep_alive_timeout_seconds = 5;
   int keep_alive_max_requests = 10000;
   int upload_timeout_seconds = 120;  // a whole request body
+
+  // Import worker (server/import_sandbox.h): uploads are parsed in a separate process.
+  std::string import_isolation = "auto";  // auto (bwrap, else process), bwrap or process
+  std::string import_worker;              // "": motionlod-import-worker next to motionlodd
+  int64_t import_memory_bytes = int64_t{4} << 30;   // its address space; 0: unlimited
+  double import_cpu_seconds = 120;                  // its CPU time
+  double import_timeout_seconds = 180;              // its wall-clock time
+  int64_t import_output_bytes = int64_t{512} << 20;  // its reply
 
   // Keys (bearer tokens). With write_keys set, every write (POST, DELETE) needs one of
   // them; with read_keys set, every read needs one of read_keys or write_keys.

@@ -11,6 +11,8 @@
 namespace motionlod::server::http {
 namespace {
 
+constexpr char kHex[] = "0123456789abcdef";
+
 std::string Lower(std::string_view text) {
   std::string lower(text);
   std::transform(lower.begin(), lower.end(), lower.begin(),
@@ -388,30 +390,38 @@ bool CheckFraming(const Request& request, const FramingLimits& limits, Response&
 }
 
 std::string NewRequestId() {
+  std::string id;
+  NewRequestId(id);
+  return id;
+}
+
+void NewRequestId(std::string& id) {
   thread_local std::mt19937_64 generator{std::random_device{}()};
-  static constexpr char kHex[] = "0123456789abcdef";
   uint64_t value = generator();
-  std::string id(16, '0');
+  id.resize(16);
   for (int i = 15; i >= 0; --i) {
     id[static_cast<size_t>(i)] = kHex[value & 15];
     value >>= 4;
   }
-  return id;
 }
 
 std::string Printable(std::string_view text, size_t max) {
   std::string out;
+  AppendPrintable(out, text, max);
+  return out;
+}
+
+void AppendPrintable(std::string& out, std::string_view text, size_t max) {
   for (unsigned char c : text.substr(0, max)) {
     if (c < 0x20 || c == 0x7f || c == '\\') {
-      char escaped[8];
-      std::snprintf(escaped, sizeof escaped, "\\x%02x", c);
-      out += escaped;
+      out += "\\x";
+      out += kHex[c >> 4];
+      out += kHex[c & 15];
     } else {
       out += static_cast<char>(c);
     }
   }
   if (text.size() > max) out += "...";
-  return out;
 }
 
 }  // namespace motionlod::server::http

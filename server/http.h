@@ -158,8 +158,12 @@ bool CheckFraming(const Request& request, const FramingLimits& limits, Response&
 
 // A random 16-hex-digit request id.
 std::string NewRequestId();
+// The same, written over `id` (no allocation once it has held one).
+void NewRequestId(std::string& id);
 
 // Text safe to log: control characters escaped, at most `max` bytes.
 std::string Printable(std::string_view text, size_t max = 200);
+// The same, appended to `out`.
+void AppendPrintable(std::string& out, std::string_view text, size_t max = 200);
 
 }  // namespace motionlod::server::http

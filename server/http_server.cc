@@ -4,6 +4,7 @@
 #include <httplib.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
+#include <spdlog/fmt/fmt.h>
 #include <spdlog/spdlog.h>
 #include <sys/socket.h>
 
@@ -11,6 +12,12 @@
 #include <atomic>
 #include <cctype>
 #include <chrono>
+#include <condition_variable>
+#include <cstdio>
+#include <ctime>
+#include <iterator>
+#include <mutex>
+#include <thread>
 
 namespace motionlod::server {
 namespace {
@@ -18,12 +25,17 @@ namespace {
 using Clock = std::chrono::steady_clock;
 
 // Per connection thread: the request being served (httplib calls the pre-routing
-// handler, the route handler and the logger of one request on the same thread).
+// handler, the route handler and the logger of one request on the same thread). Kept
+// from request to request so that its strings keep their capacity: serving a request
+// allocates little beyond what the library does.
 struct RequestContext {
   bool active = false;
   std::string id;
   Clock::time_point start;
   int route = -1;
+  http::Request request;
+  // The bytes of a zero-copy response, alive until the library has written them.
+  std::shared_ptr<const std::string> response_bytes;
 };
 thread_local RequestContext t_request;
 
@@ -40,9 +52,12 @@ std::string HeaderSafe(std::string value) {
   return value;
 }
 
-// A header of the library's request (its map compares names case-insensitively).
+// A header of the library's request (its map compares names case-insensitively and
+// looks up std::string keys only: one per thread is reused).
 std::optional<std::string_view> Find(const httplib::Request& req, std::string_view name) {
-  const auto found = req.headers.find(std::string(name));
+  thread_local std::string key;
+  key.assign(name);
+  const auto found = req.headers.find(key);
   if (found == req.headers.end()) return std::nullopt;
   return std::string_view(found->second);
 }
@@ -57,6 +72,120 @@ class SinkAdapter : public http::StreamSink {
 
  private:
   httplib::DataSink& sink_;
+};
+
+// The access log: one line per request, in the format of the daemon's other log lines.
+// Each connection thread formats its lines into a buffer of its own, under a lock that
+// only the flusher ever contends: no shared lock and no write(2) per request (spdlog's
+// sink serialises every line of every thread on one mutex). A buffer goes to stderr in
+// one fwrite of whole lines (stdio locks the stream per call, so lines never mix) when
+// it passes kBatchBytes, and every buffer once a second and when the server stops: a
+// line can appear up to a second after the other lines logged at the same time.
+class AccessLog {
+ public:
+  AccessLog() : flusher_([this] { FlushEverySecond(); }) {}
+  ~AccessLog() {
+    {
+      std::lock_guard lock(stop_mutex_);
+      stopping_ = true;
+    }
+    stop_.notify_all();
+    flusher_.join();
+    Flush();
+  }
+  AccessLog(const AccessLog&) = delete;
+  AccessLog& operator=(const AccessLog&) = delete;
+
+  void Write(std::string_view id, std::string_view method, std::string_view path, int status,
+             double seconds, std::string_view client) {
+    Buffer& buffer = ThreadBuffer();
+    std::lock_guard lock(buffer.mutex);
+    std::string& out = buffer.lines;
+    AppendTimestamp(out);
+    out += " info [";
+    out += id;
+    out += "] ";
+    http::AppendPrintable(out, method, 16);
+    out += ' ';
+    http::AppendPrintable(out, path);
+    fmt::format_to(std::back_inserter(out), " {} {:.2f} ms ", status, seconds * 1e3);
+    http::AppendPrintable(out, client, 64);
+    out += '\n';
+    if (out.size() >= kBatchBytes) WriteOut(out);
+  }
+
+  void Flush() {
+    std::lock_guard registry(buffers_mutex_);
+    for (const auto& buffer : buffers_) {
+      std::lock_guard lock(buffer->mutex);
+      WriteOut(buffer->lines);
+    }
+    std::fflush(stderr);
+  }
+
+ private:
+  static constexpr size_t kBatchBytes = 16384;
+  struct Buffer {
+    std::mutex mutex;
+    std::string lines;
+  };
+
+  Buffer& ThreadBuffer() {
+    // An id, not `this`: a later log at the same address must not find a stale buffer.
+    thread_local uint64_t owner = 0;
+    thread_local Buffer* buffer = nullptr;
+    if (owner != id_) {
+      std::lock_guard registry(buffers_mutex_);
+      buffers_.push_back(std::make_unique<Buffer>());
+      buffer = buffers_.back().get();
+      buffer->lines.reserve(kBatchBytes + 1024);
+      owner = id_;
+    }
+    return *buffer;
+  }
+
+  // "2026-11-22T14:04:10.123" in local time, as spdlog's "%Y-%m-%dT%H:%M:%S.%e"; the
+  // seconds are formatted once per second per thread.
+  static void AppendTimestamp(std::string& out) {
+    thread_local std::time_t formatted_second = -1;
+    thread_local char second_text[32] = "";
+    const auto now = std::chrono::system_clock::now();
+    const std::time_t second = std::chrono::system_clock::to_time_t(now);
+    if (second != formatted_second) {
+      std::tm local{};
+      localtime_r(&second, &local);
+      std::strftime(second_text, sizeof second_text, "%Y-%m-%dT%H:%M:%S", &local);
+      formatted_second = second;
+    }
+    const auto millis =
+        std::chrono::duration_cast<std::chrono::milliseconds>(now.time_since_epoch()).count() %
+        1000;
+    fmt::format_to(std::back_inserter(out), "{}.{:03d}", second_text, millis);
+  }
+
+  static void WriteOut(std::string& lines) {
+    if (lines.empty()) return;
+    std::fwrite(lines.data(), 1, lines.size(), stderr);
+    lines.clear();
+  }
+
+  void FlushEverySecond() {
+    std::unique_lock lock(stop_mutex_);
+    while (!stop_.wait_for(lock, std::chrono::seconds(1), [this] { return stopping_; })) {
+      lock.unlock();
+      Flush();
+      lock.lock();
+    }
+  }
+
+  static inline std::atomic<uint64_t> next_id_{1};
+  const uint64_t id_ = next_id_.fetch_add(1);
+  std::mutex buffers_mutex_;
+  std::vector<std::unique_ptr<Buffer>> buffers_;
+  std::mutex stop_mutex_;
+  std::condition_variable stop_;
+  bool stopping_ = false;
+  std::thread flusher_;
 };
 
 }  // namespace
@@ -74,9 +203,12 @@ struct HttpServer::Impl {
     framing.max_upload_bytes = config.max_upload_bytes;
     framing.max_json_bytes = config.max_json_bytes;
     framing.drain_bytes = static_cast<int64_t>(kDrainBytes);
+    if (config.access_log) access_log = std::make_unique<AccessLog>();
   }
 
   void Configure();
+  // Starts the thread's request: a new id, the clock, method, path and header lookup.
+  void Begin(const httplib::Request& req);
   void Handle(const httplib::Request& req, httplib::Response& res,
               const httplib::ContentReader* reader);
   http::BodyResult ReadBody(const httplib::Request& req, const httplib::ContentReader* reader,
@@ -89,6 +221,8 @@ struct HttpServer::Impl {
   HttpMetrics& metrics;
   http::DispatchOptions dispatch;
   http::FramingLimits framing;
+  // Null when access_log is off.
+  std::unique_ptr<AccessLog> access_log;
   httplib::Server server;
   std::atomic<int> listen_fd{-1};
 };
@@ -120,14 +254,9 @@ void HttpServer::Impl::Configure() {
   // bounded) body already, and its regex route table would only cost time. POST goes
   // on to the content-reader handler below, which reads the body under our limits.
   server.set_pre_routing_handler([this](const httplib::Request& req, httplib::Response& res) {
-    t_request = {true, http::NewRequestId(), Clock::now(), -1};
-    http::Request request;
-    request.method = req.method;
-    request.path = req.path;
-    request.request_id = t_request.id;
-    request.header_lookup = [&req](std::string_view name) { return Find(req, name); };
+    Begin(req);
     http::Response out;
-    if (!http::CheckFraming(request, framing, out)) {
+    if (!http::CheckFraming(t_request.request, framing, out)) {
       // The body is left unread: the connection cannot be reused.
       out.SetHeader("Connection", "close");
       Write(req, out, res);
@@ -257,27 +386,51 @@ http::BodyResult HttpServer::Impl::ReadBody(const httplib::Request& req,
   return body;
 }
 
+void HttpServer::Impl::Begin(const httplib::Request& req) {
+  RequestContext& context = t_request;
+  context.active = true;
+  http::NewRequestId(context.id);
+  context.start = Clock::now();
+  context.route = -1;
+  context.response_bytes.reset();
+  http::Request& request = context.request;
+  request.method.assign(req.method);
+  request.path.assign(req.path);
+  request.query.clear();
+  request.headers.clear();
+  request.path_params.clear();
+  request.request_id.assign(context.id);
+  request.header_lookup = [&req](std::string_view name) { return Find(req, name); };
+  request.read_body = nullptr;
+}
+
 void HttpServer::Impl::Handle(const httplib::Request& req, httplib::Response& res,
                               const httplib::ContentReader* reader) {
-  if (!t_request.active) t_request = {true, http::NewRequestId(), Clock::now(), -1};
-  http::Request request;
-  request.method = req.method;
-  request.path = req.path;
-  request.request_id = t_request.id;
+  // The pre-routing handler has begun the request on this thread (POST bodies too).
+  if (!t_request.active) Begin(req);
+  http::Request& request = t_request.request;
   for (const auto& [name, value] : req.params) request.query.emplace_back(name, value);
-  request.header_lookup = [&req](std::string_view name) { return Find(req, name); };
   bool body_read = reader == nullptr;
   bool request_read_failed = false;  // the reader was used: it cannot be used again
-  request.read_body = [&](int64_t limit, int max_parts) {
-    bool consumed = false;
-    http::BodyResult result = ReadBody(req, reader, limit, max_parts, consumed);
-    body_read = consumed;
-    request_read_failed = !consumed;
-    return result;
-  };
+  if (reader == nullptr) {
+    // The library has read the (small, bounded) body already.
+    request.read_body = [this, &req](int64_t limit, int max_parts) {
+      bool consumed = false;
+      return ReadBody(req, nullptr, limit, max_parts, consumed);
+    };
+  } else {
+    request.read_body = [&](int64_t limit, int max_parts) {
+      bool consumed = false;
+      http::BodyResult result = ReadBody(req, reader, limit, max_parts, consumed);
+      body_read = consumed;
+      request_read_failed = !consumed;
+      return result;
+    };
+  }
   http::Response out;
   t_request.route = http::Dispatch(router, dispatch, request, out);
   if (t_request.route < 0) t_request.route = metrics.unmatched();
+  request.read_body = nullptr;  // it refers to this call's locals
   // A body left unread would be parsed as the next request. A small one is read and
   // dropped, so that a client still sending it sees the answer (401, 415, ...) instead
   // of a reset connection; a large or half-read one closes the connection.
@@ -285,10 +438,15 @@ void HttpServer::Impl::Handle(const httplib::Request& req, httplib::Response& re
     bool drained = false;
     if (reader != nullptr && !request_read_failed) {
       size_t seen = 0;
-      drained = (*reader)([&seen](const char*, size_t n) {
+      const auto drop = [&seen](const char*, size_t n) {
         seen += n;
         return seen <= kDrainBytes;
-      });
+      };
+      // A multipart body must be read with both callbacks: the library calls the part
+      // header one without checking it (an empty one throws std::bad_function_call).
+      drained = req.is_multipart_form_data()
+                    ? (*reader)([](const httplib::MultipartFormData&) { return true; }, drop)
+                    : (*reader)(drop);
     }
     if (!drained) out.SetHeader("Connection", "close");
   }
@@ -316,12 +474,14 @@ void HttpServer::Impl::Write(const httplib::Request& req, http::Response& out,
           if (on_close) on_close();
         });
   } else if (out.shared) {
-    auto bytes = std::move(out.shared);
-    const size_t offset = out.offset;
+    // The provider runs on this thread before the logger: the thread's context keeps the
+    // bytes alive, and the provider captures one pointer (no allocation for it).
+    t_request.response_bytes = std::move(out.shared);
+    const char* const data = t_request.response_bytes->data() + out.offset;
     res.set_content_provider(
         out.length, out.content_type,
-        [bytes, offset](size_t from, size_t length, httplib::DataSink& sink) {
-          return sink.write(bytes->data() + offset + from, length);
+        [data](size_t from, size_t length, httplib::DataSink& sink) {
+          return sink.write(data + from, length);
         },
         on_close ? httplib::ContentProviderResourceReleaser([on_close](bool) { on_close(); })
                  : httplib::ContentProviderResourceReleaser());
@@ -336,12 +496,12 @@ void HttpServer::Impl::Log(const httplib::Request& req, const httplib::Response&
   const double seconds =
       active ? std::chrono::duration<double>(Clock::now() - t_request.start).count() : 0.0;
   metrics.Record(active ? t_request.route : metrics.unmatched(), res.status, seconds);
-  if (config.access_log && spdlog::should_log(spdlog::level::info)) {
-    spdlog::info("[{}] {} {} {} {:.2f} ms {}", active ? t_request.id : "-",
-                 http::Printable(req.method, 16), http::Printable(req.path), res.status,
-                 seconds * 1e3, req.remote_addr);
+  if (access_log && spdlog::should_log(spdlog::level::info)) {
+    access_log->Write(active ? std::string_view(t_request.id) : std::string_view("-"), req.method,
+                      req.path, res.status, seconds, req.remote_addr);
   }
   t_request.active = false;
+  t_request.response_bytes.reset();
 }
 
 HttpServer::HttpServer(const Config& config, const http::Router& router, HttpMetrics& metrics)
@@ -368,7 +528,12 @@ StatusOr<int> HttpServer::Bind() {
   return port;
 }
 
-bool HttpServer::Run() { return impl_->server.listen_after_bind(); }
+bool HttpServer::Run() {
+  const bool served = impl_->server.listen_after_bind();
+  // The connection threads have ended: their last access lines go out now.
+  if (impl_->access_log) impl_->access_log->Flush();
+  return served;
+}
 
 void HttpServer::Stop() { impl_->server.stop(); }
 

@@ -9,7 +9,10 @@
 //  * its own range handling (the library's is switched off per response), problem+json
 //    for the errors the library raises itself, an exception handler that never reports
 //    what was thrown, and no request header value ever copied into a response header;
-//  * a request id per request (X-Request-Id), an access log line and request metrics.
+//  * a request id per request (X-Request-Id), request metrics, and an access log line
+//    formatted into a buffer of the connection thread (no lock shared between requests);
+//  * per-thread request state reused from request to request: little allocation per
+//    request beyond the library's own.
 #pragma once
 
 #include <memory>

@@ -10,7 +10,8 @@ LevelCache::Bytes LevelCache::Get(const std::string& key) {
     return nullptr;
   }
   ++hits_;
-  lru_.splice(lru_.begin(), lru_, found->second);
+  // A hot level is usually at the front already.
+  if (found->second != lru_.begin()) lru_.splice(lru_.begin(), lru_, found->second);
   return found->second->bytes;
 }
 

@@ -23,6 +23,7 @@
 #include "server/http_server.h"
 #include "server/routes.h"
 #include "server/service.h"
+#include "server/web_assets.h"
 
 namespace motionlod::server {
 namespace {
@@ -155,6 +156,13 @@ int Main(int argc, char** argv) {
   context.open_streams = &open_streams;
   context.open_uploads = &open_uploads;
   context.render_http_metrics = [&metrics](std::string& out) { metrics->Render(out); };
+  auto web = LoadWebAssets(config.web_root);
+  if (web.ok()) {
+    context.web = &web.value();
+    spdlog::info("web viewer: {} files from {}", web->files.size(), config.web_root);
+  } else if (!config.web_root.empty()) {
+    spdlog::warn("web viewer not served ({}); / says how to build it", web.status().message());
+  }
   const http::Router router = MakeRouter(context);
   metrics = std::make_unique<HttpMetrics>(RouteLabels(router));
   HttpServer server(config, router, *metrics);
@@ -172,6 +180,7 @@ int Main(int argc, char** argv) {
                config.http_threads);
   spdlog::default_logger()->flush();
   std::printf("listening on %s\n", base_url.c_str());
+  if (context.web != nullptr) std::printf("web viewer: %s/\n", base_url.c_str());
   std::fflush(stdout);
 
   std::thread waiter([&] {

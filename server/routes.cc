@@ -342,6 +342,44 @@ bool NextEvent(EventStream& state, http::StreamSink& sink) {
   return true;
 }
 
+void ServeWebFile(const WebFile& file, const Request& request, Response& response) {
+  response.SetHeader("ETag", file.etag);
+  response.SetHeader("Cache-Control", file.cache_control);
+  response.SetHeader("X-Content-Type-Options", "nosniff");
+  if (auto match = request.Header("if-none-match"); match && MatchesEtag(*match, file.etag)) {
+    response.status = 304;
+    return;
+  }
+  response.status = 200;
+  response.content_type = file.content_type;
+  response.shared = file.bytes;
+  response.offset = 0;
+  response.length = file.bytes->size();
+}
+
+// One exact route per file listed at start-up ("/" is index.html); without them, "/"
+// explains how to build the viewer.
+void AddWebRoutes(http::Router& router, const WebAssets* web) {
+  const WebFile* index = web != nullptr ? web->index() : nullptr;
+  if (index == nullptr) {
+    router.Add("GET", "/", Access::kPublic, [](Request& request, Response& response) {
+      http::SetProblem(request, response, 404,
+                       "the web viewer is not built: run `bash scripts/setup.sh` (it runs npm ci "
+                       "and the Vite build into web/dist), or point web_root (--web-root, "
+                       "MOTIONLODD_WEB_ROOT) at a built viewer; the API is under /v1");
+    });
+    return;
+  }
+  router.Add("GET", "/", Access::kPublic, [index](Request& request, Response& response) {
+    ServeWebFile(*index, request, response);
+  });
+  for (const WebFile& file : web->files) {
+    router.Add(
+        "GET", file.url_path, Access::kPublic,
+        [&file](Request& request, Response& response) { ServeWebFile(file, request, response); });
+  }
+}
+
 }  // namespace
 
 int HttpStatus(ErrorKind kind) {
@@ -543,6 +581,37 @@ http::Router MakeRouter(const RouteContext& context) {
                response.SetHeader("Location", choice->url);
              });
 
+  // One level as glTF 2.0 binary (docs/EXPORT.md): the route the web viewer loads.
+  router.Add(
+      "GET", "/v1/bakes/{id}/levels/{file}", Access::kRead,
+      [&service](Request& request, Response& response) {
+        constexpr std::string_view kSuffix = ".glb";
+        const std::string_view file = request.path_params[1];
+        const std::optional<uint64_t> joints =
+            file.ends_with(kSuffix) ? ParseUnsigned(file.substr(0, file.size() - kSuffix.size()))
+                                    : std::nullopt;
+        if (!joints || *joints == 0 || *joints > 65535) {
+          return http::SetProblem(
+              request, response, 404,
+              "a level is exported as /v1/bakes/{id}/levels/{joints}.glb, joints its kept count");
+        }
+        auto gltf = service.GetLevelGltf(request.path_params[0], static_cast<int>(*joints));
+        if (!gltf.ok()) return Fail(request, response, gltf.error());
+        const std::string etag = "\"" + gltf->key + "\"";
+        response.SetHeader("ETag", etag);
+        // A bake id names its content; the export of its level changes only with the exporter.
+        response.SetHeader("Cache-Control", "public, max-age=86400");
+        if (auto match = request.Header("if-none-match"); match && MatchesEtag(*match, etag)) {
+          response.status = 304;
+          return;
+        }
+        response.content_type = "model/gltf-binary";
+        response.length = gltf->glb->size();
+        response.offset = 0;
+        response.shared = std::move(gltf->glb);
+        response.status = 200;
+      });
+
   // Jobs.
   router.Add("GET", "/v1/jobs/{id}", Access::kRead,
              [&service, &config, context](Request& request, Response& response) {
@@ -596,6 +665,8 @@ http::Router MakeRouter(const RouteContext& context) {
   router.Add(
       "GET", "/v1/levels/{hash}", Access::kRead,
       [&service](Request& request, Response& response) { ServeLevel(service, request, response); });
+
+  AddWebRoutes(router, context.web);
   return router;
 }
 

@@ -11,6 +11,7 @@
 #include "server/config.h"
 #include "server/http.h"
 #include "server/service.h"
+#include "server/web_assets.h"
 
 namespace motionlod::server {
 
@@ -23,6 +24,8 @@ struct RouteContext {
   std::atomic<int>* open_streams = nullptr;
   // Upload bodies being received now (bounded by config->max_concurrent_uploads).
   std::atomic<int>* open_uploads = nullptr;
+  // The web viewer's files, served at "/"; nullptr: "/" says how to build them.
+  const WebAssets* web = nullptr;
 };
 
 http::Router MakeRouter(const RouteContext& context);

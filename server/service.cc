@@ -14,6 +14,7 @@
 #include "core/solve_levels.h"
 #include "io/retarget.h"
 #include "io/sha256.h"
+#include "pipeline/export.h"
 #include "pipeline/parallel.h"
 #include "proto/level_format.h"
 
@@ -216,6 +217,20 @@ StatusOr<std::unique_ptr<Service>> Service::Open(const Config& config) {
     return Status(StatusCode::kInternal,
                   "cannot create the data directory '" + config.data_dir + "': " + error.message());
   }
+  ImportLimits limits;
+  limits.memory_bytes = config.import_memory_bytes;
+  limits.cpu_seconds = config.import_cpu_seconds;
+  limits.wall_seconds = config.import_timeout_seconds;
+  limits.output_bytes = config.import_output_bytes;
+  auto importer = ImportSandbox::Create(config.import_isolation, config.import_worker, limits);
+  if (!importer.ok()) return importer.status();
+  service->importer_ = std::move(*importer);
+  if (service->importer_->fallback_reason().empty()) {
+    spdlog::info("imports run in a {} sandbox", IsolationName(service->importer_->isolation()));
+  } else {
+    spdlog::warn("imports run as plain processes with limits only: bubblewrap does not work ({})",
+                 service->importer_->fallback_reason());
+  }
   auto store = Store::Open(std::filesystem::path(config.data_dir) / "motionlodd.db");
   if (!store.ok()) return store.status();
   service->store_ = std::move(*store);
@@ -361,12 +376,17 @@ StatusOr<std::shared_ptr<const io::Asset>> Service::LoadSource(
     if (!bytes.ok()) return bytes.status();
     sources.push_back({f.name, std::move(*bytes)});
   }
-  io::LoadOptions options;
-  options.max_total_bytes = static_cast<size_t>(config_.max_upload_bytes);
-  auto asset = io::LoadAsset(std::move(sources), options);
+  auto asset = Import(sources);
   if (!asset.ok()) return asset.status();
   CacheAsset(source_id, *asset);
   return *asset;
+}
+
+StatusOr<std::shared_ptr<const io::Asset>> Service::Import(
+    const std::vector<io::SourceFile>& files) {
+  io::LoadOptions options;
+  options.max_total_bytes = static_cast<size_t>(config_.max_upload_bytes);
+  return importer_->Import(files, options);
 }
 
 void Service::CacheAsset(const std::string& source_id, std::shared_ptr<const io::Asset> asset) {
@@ -421,9 +441,7 @@ Result<Created<api::CharacterInfo>> Service::UploadCharacter(std::vector<io::Sou
   if (!slot.acquired()) {
     return Error(ErrorKind::kUnavailable, "too many uploads are being imported; retry shortly", 2);
   }
-  io::LoadOptions options;
-  options.max_total_bytes = static_cast<size_t>(config_.max_upload_bytes);
-  auto asset = io::LoadAsset(files, options);
+  auto asset = Import(files);
   if (!asset.ok()) return ImportError(asset.status());
   const core::RawCharacter& raw = (*asset)->character();
   if (auto built = core::BuildCharacter(raw); !built.ok()) {
@@ -546,9 +564,7 @@ Result<Created<std::vector<api::MotionInfo>>> Service::UploadMotion(
   }
   auto target = LoadSource(character_id, (*character)->files);
   if (!target.ok()) return Internal(target.status());
-  io::LoadOptions options;
-  options.max_total_bytes = static_cast<size_t>(config_.max_upload_bytes);
-  auto asset = io::LoadAsset(files, options);
+  auto asset = Import(files);
   if (!asset.ok()) return ImportError(asset.status());
   if ((*asset)->animations().empty())
     return Error(ErrorKind::kUnprocessable, "the file has no animation");
@@ -1103,16 +1119,9 @@ Result<api::LevelChoice> Service::ChooseLevel(const std::string& bake_id, double
     if (auto found = tables_.find(bake_id); found != tables_.end()) table = found->second;
   }
   if (!table) {
-    auto bake = store_->GetBake(bake_id);
-    if (!bake.ok()) return Internal(bake.status());
-    if (!bake->has_value()) return Error(ErrorKind::kNotFound, "no bake " + bake_id);
-    if ((*bake)->level_set.empty()) {
-      auto job = GetJob(bake_id);
-      return Error(ErrorKind::kConflict, "bake " + bake_id + " has no levels yet (state: " +
-                                             (job.ok() ? job->state : std::string("unknown")) +
-                                             "); wait on /v1/jobs/" + bake_id);
-    }
-    auto loaded = GetLevelTable(**bake);
+    auto bake = BakeWithLevels(bake_id);
+    if (!bake.ok()) return bake.error();
+    auto loaded = GetLevelTable(bake.value());
     if (!loaded.ok()) return Internal(loaded.status());
     table = *loaded;
   }
@@ -1149,6 +1158,60 @@ Result<LevelCache::Bytes> Service::GetLevel(const std::string& hash) {
   auto shared = std::make_shared<const std::string>(std::move(*bytes));
   cache_.Put(hash, shared);
   return LevelCache::Bytes(shared);
+}
+
+Result<BakeRecord> Service::BakeWithLevels(const std::string& bake_id) {
+  if (!api::IsContentId(bake_id))
+    return Error(ErrorKind::kNotFound, "no bake with that id (ids are 64 hex digits)");
+  auto bake = store_->GetBake(bake_id);
+  if (!bake.ok()) return Internal(bake.status());
+  if (!bake->has_value()) return Error(ErrorKind::kNotFound, "no bake " + bake_id);
+  if ((*bake)->level_set.empty()) {
+    auto job = GetJob(bake_id);
+    return Error(ErrorKind::kConflict, "bake " + bake_id + " has no levels yet (state: " +
+                                           (job.ok() ? job->state : std::string("unknown")) +
+                                           "); wait on /v1/jobs/" + bake_id);
+  }
+  return std::move(**bake);
+}
+
+Result<Service::GltfFile> Service::GetLevelGltf(const std::string& bake_id, int joints) {
+  auto bake = BakeWithLevels(bake_id);
+  if (!bake.ok()) return bake.error();
+  auto levels = store_->GetLevels(bake_id);
+  if (!levels.ok()) return Internal(levels.status());
+  const LevelRecord* level = nullptr;
+  std::string available;
+  for (const LevelRecord& record : *levels) {
+    if (record.joints == joints) level = &record;
+    available += (available.empty() ? "" : ", ") + std::to_string(record.joints);
+  }
+  if (level == nullptr) {
+    return Error(ErrorKind::kNotFound, "bake " + bake_id + " has no level with " +
+                                           std::to_string(joints) + " joints; its levels keep " +
+                                           available);
+  }
+  auto motion = store_->GetMotion(bake->motion_id);
+  if (!motion.ok()) return Internal(motion.status());
+  const std::string animation = motion->has_value() ? (*motion)->animation : std::string();
+  GltfFile file;
+  // The version after "motionlod-gltf/" changes whenever the exporter writes other bytes.
+  file.key = io::Sha256Hex("motionlod-gltf/1\nlevel " + level->hash + "\ncharacter " +
+                           bake->character_id + "\nanimation " +
+                           std::to_string(animation.size()) + ":" + animation + "\n");
+  if ((file.glb = cache_.Get(file.key))) return file;
+  auto one_level = GetLevel(level->hash);
+  if (!one_level.ok()) return one_level.error();
+  auto character = store_->GetCharacter(bake->character_id);
+  if (!character.ok()) return Internal(character.status());
+  if (!character->has_value()) return Error(ErrorKind::kNotFound, "no character " + bake->character_id);
+  auto asset = LoadSource((*character)->id, (*character)->files);
+  if (!asset.ok()) return Internal(asset.status());
+  auto exported = pipeline::ExportLevelGltf(**asset, *one_level.value(), joints, animation);
+  if (!exported.ok()) return Internal(exported.status());
+  file.glb = std::make_shared<const std::string>(std::move(exported->glb));
+  cache_.Put(file.key, file.glb);
+  return file;
 }
 
 bool Service::Ready() { return !draining_ && queue_ != nullptr && store_->Healthy(); }

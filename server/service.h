@@ -30,6 +30,7 @@
 #include "proto/api.h"
 #include "server/blob_store.h"
 #include "server/config.h"
+#include "server/import_sandbox.h"
 #include "server/job_queue.h"
 #include "server/level_cache.h"
 #include "server/metrics.h"
@@ -139,6 +140,15 @@ class Service {
   // The one-level file of that hash (served from the cache when hot).
   Result<LevelCache::Bytes> GetLevel(const std::string& hash);
 
+  // The level of a bake that keeps `joints` joints as glTF 2.0 binary (docs/EXPORT.md),
+  // exported from the stored character on the first request and then served from the
+  // level cache under `key`, the SHA-256 of what it is made of (an ETag).
+  struct GltfFile {
+    LevelCache::Bytes glb;
+    std::string key;
+  };
+  Result<GltfFile> GetLevelGltf(const std::string& bake_id, int joints);
+
   bool Ready();
   // Queue, jobs, bakes and cache metrics in Prometheus text.
   void RenderMetrics(std::string& out);
@@ -164,15 +174,21 @@ class Service {
                                                         const std::vector<FileRecord>& files);
   void CacheAsset(const std::string& source_id, std::shared_ptr<const io::Asset> asset);
   StatusOr<std::shared_ptr<const LevelTable>> GetLevelTable(const BakeRecord& bake);
+  // The bake record of a bake that has levels (an id checked first; 404, or 409 while its
+  // job has not succeeded).
+  Result<BakeRecord> BakeWithLevels(const std::string& bake_id);
   Result<proto::api::JobStatus> JobFromStore(const std::string& id);
   proto::api::JobStatus ToStatus(const JobRecord& record, uint64_t version) const;
   Result<proto::api::BakeInfo> ToBakeInfo(const BakeRecord& bake);
   void CollectBlobs(const std::vector<std::string>& blobs);
+  // Imports uploaded files in the sandboxed worker (never in this process).
+  StatusOr<std::shared_ptr<const io::Asset>> Import(const std::vector<io::SourceFile>& files);
   Status StoreFiles(const std::vector<io::SourceFile>& files, std::vector<FileRecord>& records);
 
   const Config config_;
   std::unique_ptr<Store> store_;
   std::unique_ptr<BlobStore> blobs_;
+  std::unique_ptr<ImportSandbox> importer_;
   LevelCache cache_;
   std::unique_ptr<JobQueue> queue_;
   std::atomic<bool> draining_{false};

@@ -3,6 +3,8 @@
 //   motionlod rank CHARACTER [--motion M] [--animation NAME] [--fps F] [--lock J,...] [--json]
 //   motionlod bake CHARACTER [--motion M] [--animation NAME] [--levels 30,20,10,5 | --all-levels]
 //                  [--variant vpno+pd] [--fps F] [--lock J,...] [--threads N] [--curves] --out DIR
+//   motionlod export CHARACTER [--motion M] [--animation NAME] [--variant vpno+pd] [--fps F]
+//                    [--lock J,...] [--joints N] [--level-set DIR/levels.mlod] --out FILE.glb
 //   motionlod plot REPORT.json -o FIG.svg
 // Exit codes: 0 success, 2 bad input (usage, unreadable or invalid files, impossible
 // requests), 1 failure to write the output.
@@ -21,6 +23,7 @@
 #include "io/asset.h"
 #include "io/sha256.h"
 #include "pipeline/bake.h"
+#include "pipeline/export.h"
 #include "pipeline/report.h"
 #include "tools/atomic_output.h"
 #include "tools/plot_svg.h"
@@ -217,6 +220,47 @@ int RunBake(const CommonOptions& o, const std::vector<int>& levels, bool all_lev
   return 0;
 }
 
+// Exports the level keeping `joints` joints (0 = all of them) as glTF: from the level set
+// at `level_set_path` when given, else from a bake of that single level.
+int RunExport(const CommonOptions& o, const std::string& variant, int joints,
+              const std::string& level_set_path, const std::string& out) {
+  auto parsed_variant = core::ParseVariant(variant);
+  if (!parsed_variant.ok()) return Fail(parsed_variant.status());
+  auto request = MakeRequest(o);
+  if (!request.ok()) return Fail(request.status());
+  if (joints == 0) joints = static_cast<int>(request->character->character().skeleton.parents.size());
+  std::string level_set, animation = o.animation;
+  if (!level_set_path.empty()) {
+    std::ifstream in(level_set_path, std::ios::binary);
+    if (!in) return Fail(InvalidArgument("cannot read '" + level_set_path + "'"));
+    level_set = ReadFileOrEmpty(level_set_path);
+  } else {
+    request->levels = {joints};
+    request->settings.variant = *parsed_variant;
+    request->source_hash = SourceHash(o);
+    ProgressBar bar;
+    auto baked = pipeline::Bake(*request, [&](const pipeline::BakeProgress& p) { bar.Update(p); });
+    if (!baked.ok()) return Fail(baked.status());
+    level_set = std::move(baked->level_set);
+    animation = baked->report["motion"]["name"].get<std::string>();
+  }
+  auto exported = pipeline::ExportLevelGltf(*request->character, level_set, joints, animation);
+  if (!exported.ok()) {
+    return Fail(Status(exported.status().code(),
+                       (level_set_path.empty() ? "" : "'" + level_set_path + "': ") +
+                           exported.status().message()));
+  }
+  if (Status status = WriteFileAtomically(out, exported->glb); !status.ok()) return Fail(status, kExitOutput);
+  const io::GltfExportStats& stats = exported->stats;
+  std::printf("wrote %s (%zu bytes): %d joints, %d vertices, %d frames; max vertex deviation "
+              "from the level %.3g%% of the height; %d vertices over %d influences (dropped weight "
+              "up to %.3g)\n",
+              out.c_str(), exported->glb.size(), stats.joints, stats.vertices, stats.frames,
+              stats.max_vertex_deviation_pct, stats.truncated_vertices, io::kGltfMaxInfluences,
+              stats.max_dropped_weight);
+  return 0;
+}
+
 int RunPlot(const std::string& report_path, const std::string& out) {
   std::ifstream in(report_path);
   if (!in) return Fail(InvalidArgument("cannot read '" + report_path + "'"));
@@ -258,6 +302,20 @@ int Main(int argc, char** argv) {
   bake->add_flag("--curves", curves, "also solve the four variants at every level for `plot`");
   bake->add_option("--out", out, "output directory (levels.mlod, report.json)")->required();
 
+  CommonOptions export_options;
+  std::string export_variant = "vpno+pd", level_set_path, glb_path;
+  int export_joints = 0;
+  CLI::App* export_command =
+      app.add_subcommand("export", "write one level as glTF 2.0 (.glb) with its animation");
+  AddCommon(export_command, export_options);
+  export_command->add_option("--variant", export_variant, "vp, vpno, vp+pd or vpno+pd (rigid)")
+      ->capture_default_str();
+  export_command->add_option("--joints", export_joints, "kept joints of the level (default: all)")
+      ->check(CLI::PositiveNumber);
+  export_command->add_option("--level-set", level_set_path,
+                             "export from this baked levels.mlod instead of baking the level");
+  export_command->add_option("--out", glb_path, ".glb file to write")->required();
+
   std::string report_path, svg_path;
   CLI::App* plot = app.add_subcommand("plot", "draw mean E(t) against kept joints (fig. 7) as SVG");
   plot->add_option("REPORT", report_path, "report.json of a bake")->required();
@@ -273,6 +331,9 @@ int Main(int argc, char** argv) {
   if (rank->parsed()) return RunRank(rank_options, rank_json);
   if (bake->parsed()) {
     return RunBake(bake_options, levels, all_levels, variant, keep_pd_translation, curves, out);
+  }
+  if (export_command->parsed()) {
+    return RunExport(export_options, export_variant, export_joints, level_set_path, glb_path);
   }
   return RunPlot(report_path, svg_path);
 }

@@ -281,6 +281,7 @@ TEST(OpenApi, TheServedSpecDescribesExactlyTheRoutesTheDaemonHas) {
   const fs::path dir = testing::TestDirectory();
   Config config;
   config.data_dir = (dir / "data").string();
+  config.import_worker = MOTIONLOD_IMPORT_WORKER;  // not next to this test binary
   auto service = Service::Open(config);
   ASSERT_TRUE(service.ok()) << service.status().message();
   std::atomic<int> streams{0}, uploads{0};

@@ -1,10 +1,11 @@
 // What a hostile or careless client gets: keys, size limits (plain, chunked and
 // compressed), malformed and hostile files, bad requests, header injection, a busy
-// daemon. Every error is problem+json and the daemon keeps serving.
+// daemon. Every error is problem+json and the daemon keeps serving. hostile_http_test.cc
+// holds what only a raw socket can send.
 #include <gtest/gtest.h>
 #include <signal.h>
-#include <zlib.h>
 
+#include "tests/server/raw_http.h"
 #include "tests/server/test_util.h"
 
 namespace motionlod::server::testing {
@@ -16,20 +17,6 @@ constexpr const char* kWriteKey = "write-key-0123456789abcdef";
 constexpr const char* kReadKey = "read-key-0123456789abcdef";
 
 std::string Sample() { return SourcePath("samples/Rig_Medium_MovementBasic.glb"); }
-
-std::string Gzip(const std::string& bytes) {
-  z_stream stream{};
-  deflateInit2(&stream, Z_BEST_COMPRESSION, Z_DEFLATED, 31, 8, Z_DEFAULT_STRATEGY);
-  std::string out(deflateBound(&stream, bytes.size()) + 64, '\0');
-  stream.next_in = reinterpret_cast<Bytef*>(const_cast<char*>(bytes.data()));
-  stream.avail_in = static_cast<uInt>(bytes.size());
-  stream.next_out = reinterpret_cast<Bytef*>(out.data());
-  stream.avail_out = static_cast<uInt>(out.size());
-  deflate(&stream, Z_FINISH);
-  out.resize(stream.total_out);
-  deflateEnd(&stream);
-  return out;
-}
 
 void ExpectServing(httplib::Client& client) {
   auto health = client.Get("/healthz");

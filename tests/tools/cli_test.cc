@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include "proto/level_format.h"
+#include "tests/tools/gltf_validator.h"
 
 namespace motionlod::tools {
 namespace {
@@ -145,6 +146,108 @@ TEST_F(Cli, BadInputExitsWithTwoAndWritesNothing) {
     EXPECT_EQ(run.exit_code, 2) << c.args << "\n" << run.output;
     EXPECT_NE(run.output.find(c.message), std::string::npos) << c.args << "\n" << run.output;
     EXPECT_FALSE(fs::exists(out)) << c.args;
+  }
+}
+
+std::string DataFile(const std::string& relative) {
+  return std::string(MOTIONLOD_SHARED_DATA) + "/" + relative;
+}
+
+// Joint nodes, skin joints and animation channels of an exported level.
+void ExpectGltfLevel(const fs::path& glb, int joints, bool rigid) {
+  const nlohmann::json gltf = testing::GlbJson(ReadAll(glb));
+  ASSERT_TRUE(gltf.is_object()) << glb << " is no GLB";
+  EXPECT_EQ(gltf["asset"]["version"], "2.0");
+  EXPECT_EQ(gltf["nodes"].size(), static_cast<size_t>(joints) + 1)
+      << "joint nodes and the mesh node";
+  EXPECT_EQ(gltf["skins"][0]["joints"].size(), static_cast<size_t>(joints));
+  EXPECT_EQ(gltf["animations"][0]["channels"].size(), static_cast<size_t>(joints) * (rigid ? 2 : 3))
+      << "translation and rotation per joint, and scale when not rigid";
+}
+
+// `motionlod export` on real characters at several levels and variants: each file passes
+// the Khronos validator with zero errors and holds the level's skeleton and channels.
+TEST_F(Cli, ExportsLevelsThatTheGltfValidatorAccepts) {
+  if (!fs::exists(DataFile("MANIFEST.md"))) GTEST_SKIP() << "no ../shared/data";
+  struct Case {
+    std::string args;
+    int joints;
+    bool rigid;
+  };
+  const Case cases[] = {
+      {DataFile("characters/CesiumMan.glb") + " --joints 8", 8, true},
+      {DataFile("characters/CesiumMan.glb"), 19, true},  // full detail: every joint
+      {DataFile("characters/Fox.glb") + " --animation Walk --variant vp --joints 10", 10, false},
+      {DataFile("characters/Orc.gltf") + " --animation Walk --variant vpno --joints 20", 20, false},
+      {DataFile("characters/stormtrooper.dae") + " --variant vp+pd --joints 25", 25, true},
+      {DataFile("characters/Knight.glb") + " --motion " +
+           DataFile("characters/Rig_Medium_General.glb") + " --animation Idle_A --joints 12",
+       12, true},
+  };
+  std::vector<fs::path> files;
+  for (const Case& c : cases) {
+    const fs::path glb = dir_ / ("level" + std::to_string(files.size()) + ".glb");
+    const ProcessResult run = Exec("export " + c.args + " --threads 2 --out " + glb.string());
+    ASSERT_EQ(run.exit_code, 0) << c.args << "\n" << run.output;
+    EXPECT_NE(run.output.find("max vertex deviation"), std::string::npos) << run.output;
+    ExpectGltfLevel(glb, c.joints, c.rigid);
+    files.push_back(glb);
+  }
+  testing::ExpectValidGltf(files);
+}
+
+// From a baked level set: the level asked for, or exit 2 naming the levels there are.
+TEST_F(Cli, ExportsALevelOfABakedLevelSet) {
+  const fs::path out = dir_ / "out";
+  const ProcessResult bake =
+      Exec("bake " + Sample() + " --threads 2 --animation Walking_A --levels 23,9 --out " +
+           out.string());
+  ASSERT_EQ(bake.exit_code, 0) << bake.output;
+  const fs::path glb = dir_ / "nine.glb";
+  const std::string from = " --level-set " + (out / "levels.mlod").string();
+  const ProcessResult run = Exec("export " + Sample() + from + " --joints 9 --out " + glb.string());
+  ASSERT_EQ(run.exit_code, 0) << run.output;
+  ExpectGltfLevel(glb, 9, true);
+  testing::ExpectValidGltf({glb});
+
+  const ProcessResult missing =
+      Exec("export " + Sample() + from + " --joints 5 --out " + (dir_ / "five.glb").string());
+  EXPECT_EQ(missing.exit_code, 2) << missing.output;
+  EXPECT_NE(missing.output.find("the levels keep 23, 9"), std::string::npos) << missing.output;
+  EXPECT_FALSE(fs::exists(dir_ / "five.glb"));
+}
+
+TEST_F(Cli, ExportBadInputExitsWithTwoAndWritesNothing) {
+  const fs::path out = dir_ / "out";
+  ASSERT_EQ(Exec("bake " + Sample() + " --threads 2 --levels 23 --out " + out.string()).exit_code,
+            0);
+  const fs::path glb = dir_ / "x.glb";
+  const fs::path garbage = dir_ / "garbage.mlod";
+  std::ofstream(garbage) << "not a level set";
+  struct Case {
+    std::string args;
+    std::string message;
+  };
+  std::vector<Case> cases = {
+      {(dir_ / "missing.glb").string(), "missing.glb"},
+      {Sample() + " --joints 40", "outside"},
+      {Sample() + " --joints 0", "--joints"},
+      {Sample() + " --variant vpx", "unknown variant"},
+      {Sample() + " --animation Nope", "Nope"},
+      {Sample() + " --level-set " + (dir_ / "none.mlod").string(), "none.mlod"},
+      {Sample() + " --level-set " + garbage.string(), "garbage.mlod"},
+  };
+  if (fs::exists(DataFile("MANIFEST.md"))) {
+    // A level set of another character.
+    cases.push_back({DataFile("characters/Fox.glb") + " --level-set " +
+                         (out / "levels.mlod").string() + " --joints 23",
+                     "another character"});
+  }
+  for (const Case& c : cases) {
+    const ProcessResult run = Exec("export " + c.args + " --out " + glb.string());
+    EXPECT_EQ(run.exit_code, 2) << c.args << "\n" << run.output;
+    EXPECT_NE(run.output.find(c.message), std::string::npos) << c.args << "\n" << run.output;
+    EXPECT_FALSE(fs::exists(glb)) << c.args;
   }
 }
 

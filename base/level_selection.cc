@@ -1,13 +1,14 @@
-#include "core/level_selection.h"
+#include "base/level_selection.h"
 
 #include <cmath>
 #include <limits>
+#include <numbers>
 
-namespace motionlod::core {
+namespace motionlod {
 
 double PixelHeight(const CameraView& view) {
-  const bool valid = view.fov_y_radians > 0 && view.fov_y_radians < M_PI && view.distance > 0 &&
-                     view.character_size > 0 && view.screen_height_px > 0 &&
+  const bool valid = view.fov_y_radians > 0 && view.fov_y_radians < std::numbers::pi &&
+                     view.distance > 0 && view.character_size > 0 && view.screen_height_px > 0 &&
                      std::isfinite(view.distance) && std::isfinite(view.character_size) &&
                      std::isfinite(view.screen_height_px);
   if (!valid) return 0.0;
@@ -29,4 +30,4 @@ int SelectLevel(std::span<const double> max_vertex_error_fraction, double pixel_
   return chosen;
 }
 
-}  // namespace motionlod::core
+}  // namespace motionlod

@@ -1,0 +1,499 @@
+// The crowd runtime benchmark (the paper's fig. 8 and 9, on the CPU): N characters on a
+// ground plane in front of a fixed camera, spread uniformly over the area of a 60 degree
+// wedge from 2 m to 100 m (fig. 9's layout: many far, few near). Each frame every
+// character gets its on-screen height from the camera (base/level_selection.h, fig. 5),
+// picks its level with the client's LevelSelector (1 px budget, 10% hysteresis) and is
+// skinned on the CPU by the client's skinner (client/skinner.h); beside it the same crowd
+// with every character at full detail (level 0 of the default ladder: every joint, the
+// original skinning matrices), and with every character at its coarsest level (a bound:
+// what fewer joints can save on this path at any error). The characters are the skinned, animated files of
+// ../shared/data, baked in-process with pipeline::Bake (default ladder, vpno+pd).
+//
+// Per character and frame, timed separately in the worker's CPU time
+// (CLOCK_THREAD_CPUTIME_ID: time the thread ran, so other processes on a shared machine
+// do not inflate it; the frame's wall time is reported beside it):
+//   matrix update  level choice, then the frame's m matrices of that level copied into
+//                  the frame's matrix stream (what a GPU renderer uploads: 48 m bytes)
+//   skinning       SkinFrameJob: positions and normals from the stream into a scratch
+//                  buffer of the worker (cache-resident)
+//   output         the scratch copied into the crowd's vertex buffer (24 bytes per
+//                  vertex: what a renderer hands to the GPU)
+// Quality (a separate, untimed pass on every 10th frame): each character skinned at its
+// level and at full detail; the vertex error in pixels is |p_level - p_full| scaled by
+// the character's on-screen height over its model height (the units of the bake's level
+// table), mean and max over every vertex of every character.
+//
+// The three crowds run alternately, --repetitions times per thread count; the
+// tables give the median of each figure.
+//
+//   crowd [--characters=1000] [--frames=120] [--threads=1,2] [--repetitions=3] [--data=DIR]
+//         [--budget=1] [--hysteresis=0.1] [--json=FILE]
+#include <time.h>
+
+#include <algorithm>
+#include <barrier>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <numbers>
+#include <optional>
+#include <random>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "base/level_selection.h"
+#include "client/level_selector.h"
+#include "client/skinner.h"
+#include "io/asset.h"
+#include "pipeline/bake.h"
+#include "proto/level_format.h"
+
+namespace motionlod::bench {
+namespace {
+
+namespace fs = std::filesystem;
+using client::LevelSelector;
+using client::LevelSkin;
+using client::SkinFrameJob;
+using client::SkinMesh;
+using Clock = std::chrono::steady_clock;
+
+constexpr double kFovY = std::numbers::pi / 3;  // 60 degrees
+constexpr double kScreenHeightPx = 1080;
+constexpr double kCharacterSizeM = 1.8;          // every character drawn 1.8 m tall
+constexpr double kNearM = 2, kFarM = 100;
+constexpr int kQualityEvery = 10;                // frames between quality samples
+
+struct Options {
+  int characters = 1000;
+  int frames = 120;
+  std::vector<int> threads = {1, 2};
+  int repetitions = 3;
+  fs::path data = MOTIONLOD_BENCH_DATA;
+  double budget_px = 1.0;
+  double hysteresis = 0.1;
+  std::string json_path;
+};
+
+// One kind of character: its mesh, its baked levels and the per-level merged skins.
+struct CharacterType {
+  std::string label;
+  std::shared_ptr<const core::Character> character;
+  proto::AlignedBytes level_set_bytes;
+  proto::LevelSetView level_set;
+  SkinMesh mesh;
+  std::vector<LevelSkin> skins;  // per level
+  std::optional<LevelSelector> selector;
+  double height = 0;             // model units
+};
+
+struct Instance {
+  int type = 0;
+  double distance_m = 0;
+  int phase = 0;        // frame offset into the motion
+  int level = -1;       // current level (hysteresis state)
+  size_t vertex_offset = 0;  // into the crowd's vertex buffer, in vertices
+};
+
+bool ParseOptions(int argc, char** argv, Options& o) {
+  for (int a = 1; a < argc; ++a) {
+    const std::string arg = argv[a];
+    const size_t eq = arg.find('=');
+    const std::string name = arg.substr(0, eq), value = eq == std::string::npos ? "" : arg.substr(eq + 1);
+    if (name == "--characters") {
+      o.characters = std::stoi(value);
+    } else if (name == "--frames") {
+      o.frames = std::stoi(value);
+    } else if (name == "--threads") {
+      o.threads.clear();
+      std::stringstream list(value);
+      for (std::string item; std::getline(list, item, ',');) o.threads.push_back(std::stoi(item));
+    } else if (name == "--repetitions") {
+      o.repetitions = std::stoi(value);
+    } else if (name == "--data") {
+      o.data = value;
+    } else if (name == "--budget") {
+      o.budget_px = std::stod(value);
+    } else if (name == "--hysteresis") {
+      o.hysteresis = std::stod(value);
+    } else if (name == "--json") {
+      o.json_path = value;
+    } else {
+      std::fprintf(stderr, "crowd: unknown argument '%s'\n", arg.c_str());
+      return false;
+    }
+  }
+  const bool threads_ok = !o.threads.empty() &&
+                          std::all_of(o.threads.begin(), o.threads.end(), [](int t) { return t >= 1; });
+  if (o.characters < 1 || o.frames < 1 || o.repetitions < 1 || !threads_ok || !(o.budget_px > 0)) {
+    std::fprintf(stderr,
+                 "crowd: --characters, --frames, --threads, --repetitions and --budget must be "
+                 "positive\n");
+    return false;
+  }
+  return true;
+}
+
+std::optional<CharacterType> LoadType(const fs::path& path, const Options& o) {
+  auto asset = io::LoadAssetFile(path);
+  if (!asset.ok() || (*asset)->animations().empty() || (*asset)->has_proxy_skin()) {
+    std::fprintf(stderr, "crowd: skipping %s: %s\n", path.filename().c_str(),
+                 asset.ok() ? "no animation or no skin" : asset.status().ToString().c_str());
+    return std::nullopt;
+  }
+  pipeline::BakeRequest request;
+  request.character = *asset;
+  request.threads = 2;
+  auto inputs = pipeline::PrepareInputs(request);
+  auto output = pipeline::Bake(request);
+  if (!inputs.ok() || !output.ok()) {
+    std::fprintf(stderr, "crowd: skipping %s: %s\n", path.filename().c_str(),
+                 (!inputs.ok() ? inputs.status() : output.status()).ToString().c_str());
+    return std::nullopt;
+  }
+  CharacterType type;
+  type.label = path.filename().string();
+  type.character = inputs->character;
+  type.height = type.character->height();
+  type.level_set_bytes = proto::AlignedBytes::CopyOf(output->level_set);
+  auto view = proto::DecodeLevelSet(type.level_set_bytes.bytes());
+  if (!view.ok()) return std::nullopt;
+  type.level_set = std::move(*view);
+  const core::RawSkin& skin = type.character->skin();
+  const size_t p = skin.positions.size();
+  type.mesh = SkinMesh{{skin.positions.data()->data(), 3 * p},
+                       {skin.normals.data()->data(), 3 * p},
+                       skin.influence_offsets,
+                       skin.influence_joints,
+                       skin.influence_weights};
+  std::vector<double> errors;
+  for (const proto::LevelView& level : type.level_set.levels()) {
+    auto built = LevelSkin::Build(type.mesh, level.joint_map(), level.kept_count());
+    if (!built.ok()) return std::nullopt;
+    type.skins.push_back(std::move(*built));
+    errors.push_back(level.figures().max_vertex_error_pct);
+  }
+  auto selector = LevelSelector::Create(errors, {o.budget_px, o.hysteresis});
+  if (!selector.ok()) return std::nullopt;
+  type.selector = std::move(*selector);
+  return type;
+}
+
+// Seconds of CPU time the calling thread has run.
+double ThreadCpuSeconds() {
+  timespec now{};
+  ::clock_gettime(CLOCK_THREAD_CPUTIME_ID, &now);
+  return static_cast<double>(now.tv_sec) + 1e-9 * static_cast<double>(now.tv_nsec);
+}
+
+double PixelHeightAt(double distance_m) {
+  return PixelHeight({kFovY, distance_m, kCharacterSizeM, kScreenHeightPx});
+}
+
+struct Phases {  // CPU seconds
+  double matrix_s = 0, skinning_s = 0, output_s = 0;
+  double total_s() const { return matrix_s + skinning_s + output_s; }
+  uint64_t matrix_bytes = 0;
+};
+
+// How each character's level is picked: always the finest (every joint), by pixel size
+// (the method), or always the coarsest of the ladder (the ceiling of what fewer joints
+// can save here, whatever it costs in error).
+enum class Mode { kFullDetail, kMotionLod, kCoarsest };
+const char* ModeName(Mode mode) {
+  switch (mode) {
+    case Mode::kFullDetail:
+      return "full detail";
+    case Mode::kMotionLod:
+      return "Motion LoD";
+    case Mode::kCoarsest:
+      return "coarsest level (bound)";
+  }
+  return "";
+}
+
+struct RunResult {
+  int threads = 0;
+  Mode mode = Mode::kFullDetail;
+  double ms_per_frame = 0;  // wall, per frame
+  Phases per_frame;         // CPU, summed over threads, per frame
+};
+
+// Runs the crowd for o.frames frames on `threads` workers (contiguous slices of the
+// crowd, a barrier at every frame's end).
+RunResult RunCrowd(const std::vector<CharacterType>& types, std::vector<Instance> crowd,
+                   std::vector<float>& vertex_buffer, Mode mode, int threads, const Options& o) {
+  size_t max_vertices = 0, max_kept = 0;
+  for (const CharacterType& type : types) {
+    max_vertices = std::max<size_t>(max_vertices, type.mesh.positions.size() / 3);
+    max_kept = std::max<size_t>(max_kept, type.level_set.joint_count());
+  }
+  // The frame's matrix stream: a slot of the largest palette per character.
+  std::vector<float> stream(crowd.size() * max_kept * proto::kMatrixFloats);
+  std::vector<Phases> phases(static_cast<size_t>(threads));
+  std::vector<double> frame_seconds;
+  Clock::time_point frame_start = Clock::now();
+  std::barrier frame_end(threads, [&]() noexcept {
+    const Clock::time_point now = Clock::now();
+    frame_seconds.push_back(std::chrono::duration<double>(now - frame_start).count());
+    frame_start = now;
+  });
+  auto work = [&](int worker) {
+    const size_t begin = crowd.size() * worker / threads, end = crowd.size() * (worker + 1) / threads;
+    std::vector<float> scratch_positions(3 * max_vertices), scratch_normals(3 * max_vertices);
+    Phases& mine = phases[static_cast<size_t>(worker)];
+    for (int frame = 0; frame < o.frames; ++frame) {
+      for (size_t c = begin; c < end; ++c) {
+        Instance& instance = crowd[c];
+        const CharacterType& type = types[static_cast<size_t>(instance.type)];
+        const double t0 = ThreadCpuSeconds();
+        const int level =
+            mode == Mode::kMotionLod ? type.selector->Choose(PixelHeightAt(instance.distance_m), instance.level)
+            : mode == Mode::kCoarsest ? static_cast<int>(type.level_set.level_count()) - 1
+                                      : 0;
+        instance.level = level;
+        const proto::LevelView& view = type.level_set.level(static_cast<uint32_t>(level));
+        const uint32_t t = static_cast<uint32_t>(frame + instance.phase) % view.frame_count();
+        const std::span<const float> matrices = view.frame(t);
+        float* slot = stream.data() + c * max_kept * proto::kMatrixFloats;
+        std::memcpy(slot, matrices.data(), matrices.size_bytes());
+        mine.matrix_bytes += matrices.size_bytes();
+        const double t1 = ThreadCpuSeconds();
+        const LevelSkin& skin = type.skins[static_cast<size_t>(level)];
+        const size_t floats = 3 * size_t{skin.vertex_count()};
+        const SkinFrameJob job{&skin, {slot, matrices.size()}, type.level_set.rigid(),
+                               {scratch_positions.data(), floats}, {scratch_normals.data(), floats}};
+        if (!job.Run().ok()) std::abort();  // shapes are fixed at set-up: a bug
+        const double t2 = ThreadCpuSeconds();
+        float* out = vertex_buffer.data() + instance.vertex_offset * 6;
+        std::memcpy(out, scratch_positions.data(), floats * sizeof(float));
+        std::memcpy(out + floats, scratch_normals.data(), floats * sizeof(float));
+        const double t3 = ThreadCpuSeconds();
+        mine.matrix_s += t1 - t0;
+        mine.skinning_s += t2 - t1;
+        mine.output_s += t3 - t2;
+      }
+      frame_end.arrive_and_wait();
+    }
+  };
+  frame_start = Clock::now();
+  std::vector<std::thread> workers;
+  for (int w = 1; w < threads; ++w) workers.emplace_back(work, w);
+  work(0);
+  for (std::thread& worker : workers) worker.join();
+
+  RunResult result;
+  result.threads = threads;
+  result.mode = mode;
+  // The first frame warms caches and the allocator: left out of the mean.
+  const size_t skip = frame_seconds.size() > 1 ? 1 : 0;
+  double total = 0;
+  for (size_t f = skip; f < frame_seconds.size(); ++f) total += frame_seconds[f];
+  result.ms_per_frame = 1e3 * total / static_cast<double>(frame_seconds.size() - skip);
+  for (const Phases& p : phases) {
+    result.per_frame.matrix_s += p.matrix_s / o.frames;
+    result.per_frame.skinning_s += p.skinning_s / o.frames;
+    result.per_frame.output_s += p.output_s / o.frames;
+    result.per_frame.matrix_bytes += p.matrix_bytes / static_cast<uint64_t>(o.frames);
+  }
+  return result;
+}
+
+// The median of each figure over repeated runs (each figure on its own).
+RunResult Median(std::vector<RunResult> runs) {
+  auto median = [&runs](auto field) {
+    std::vector<double> values;
+    for (const RunResult& run : runs) values.push_back(field(run));
+    std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
+    return values[values.size() / 2];
+  };
+  RunResult result = runs.front();
+  result.ms_per_frame = median([](const RunResult& r) { return r.ms_per_frame; });
+  result.per_frame.matrix_s = median([](const RunResult& r) { return r.per_frame.matrix_s; });
+  result.per_frame.skinning_s = median([](const RunResult& r) { return r.per_frame.skinning_s; });
+  result.per_frame.output_s = median([](const RunResult& r) { return r.per_frame.output_s; });
+  return result;
+}
+
+struct Quality {
+  double mean_error_px = 0, max_error_px = 0;
+  std::vector<int> characters_per_level;  // at the last sampled frame, levels 0..4+
+};
+
+// Every kQualityEvery-th frame: each character at its level (Motion LoD: with hysteresis,
+// as the run chose it; or the coarsest) against full detail, the vertex error in pixels.
+Quality MeasureQuality(const std::vector<CharacterType>& types, std::vector<Instance> crowd,
+                       Mode mode, const Options& o) {
+  Quality quality;
+  size_t max_vertices = 0;
+  for (const CharacterType& type : types) max_vertices = std::max(max_vertices, type.mesh.positions.size() / 3);
+  std::vector<float> lod_positions(3 * max_vertices), full_positions(3 * max_vertices);
+  std::vector<float> palette;
+  double sum = 0;
+  uint64_t count = 0;
+  for (int frame = 0; frame < o.frames; ++frame) {
+    const bool sample = frame % kQualityEvery == 0;
+    if (sample) quality.characters_per_level.assign(8, 0);
+    for (Instance& instance : crowd) {
+      const CharacterType& type = types[static_cast<size_t>(instance.type)];
+      const double px = PixelHeightAt(instance.distance_m);
+      instance.level = mode == Mode::kCoarsest ? static_cast<int>(type.level_set.level_count()) - 1
+                                               : type.selector->Choose(px, instance.level);
+      if (!sample) continue;
+      ++quality.characters_per_level[static_cast<size_t>(std::min(instance.level, 7))];
+      auto skin_at = [&](int level, std::vector<float>& out) {
+        const proto::LevelView& view = type.level_set.level(static_cast<uint32_t>(level));
+        const uint32_t t = static_cast<uint32_t>(frame + instance.phase) % view.frame_count();
+        const LevelSkin& skin = type.skins[static_cast<size_t>(level)];
+        const SkinFrameJob job{&skin, view.frame(t), type.level_set.rigid(),
+                               {out.data(), 3 * size_t{skin.vertex_count()}}, {}};
+        if (!job.Run().ok()) std::abort();
+      };
+      skin_at(instance.level, lod_positions);
+      skin_at(0, full_positions);
+      const double px_per_unit = px / type.height;
+      const size_t p = type.mesh.positions.size() / 3;
+      for (size_t i = 0; i < p; ++i) {
+        const double dx = lod_positions[3 * i] - full_positions[3 * i];
+        const double dy = lod_positions[3 * i + 1] - full_positions[3 * i + 1];
+        const double dz = lod_positions[3 * i + 2] - full_positions[3 * i + 2];
+        const double error = std::sqrt(dx * dx + dy * dy + dz * dz) * px_per_unit;
+        sum += error;
+        quality.max_error_px = std::max(quality.max_error_px, error);
+      }
+      count += p;
+    }
+  }
+  quality.mean_error_px = count > 0 ? sum / static_cast<double>(count) : 0;
+  while (!quality.characters_per_level.empty() && quality.characters_per_level.back() == 0)
+    quality.characters_per_level.pop_back();
+  return quality;
+}
+
+int Main(int argc, char** argv) {
+  Options o;
+  if (!ParseOptions(argc, argv, o)) return 2;
+  std::vector<CharacterType> types;
+  const fs::path dir = o.data / "characters";
+  std::vector<fs::path> files;
+  if (fs::is_directory(dir)) {
+    for (const auto& entry : fs::directory_iterator(dir)) {
+      const std::string ext = entry.path().extension().string();
+      if (ext == ".glb" || ext == ".gltf" || ext == ".dae") files.push_back(entry.path());
+    }
+  }
+  std::sort(files.begin(), files.end());
+  for (const fs::path& file : files) {
+    std::fprintf(stderr, "crowd: baking %s\n", file.filename().c_str());
+    if (auto type = LoadType(file, o)) types.push_back(std::move(*type));
+  }
+  if (types.empty()) {
+    std::fprintf(stderr, "crowd: no animated skinned character under %s\n", dir.c_str());
+    return 2;
+  }
+
+  // The scene: uniform density over the wedge's area, so the count grows with distance.
+  std::mt19937_64 random(20061);
+  std::uniform_real_distribution<double> unit(0, 1);
+  std::vector<Instance> crowd(static_cast<size_t>(o.characters));
+  size_t vertices = 0;
+  for (size_t c = 0; c < crowd.size(); ++c) {
+    Instance& instance = crowd[c];
+    instance.type = static_cast<int>(c % types.size());
+    instance.distance_m = std::sqrt(kNearM * kNearM + unit(random) * (kFarM * kFarM - kNearM * kNearM));
+    instance.phase = static_cast<int>(random() % 100000);
+    instance.vertex_offset = vertices;
+    vertices += types[static_cast<size_t>(instance.type)].mesh.positions.size() / 3;
+  }
+  std::vector<float> vertex_buffer(vertices * 6);
+
+  std::printf("## Crowd: %d characters, %d frames, %zu vertices per frame\n\n", o.characters,
+              o.frames, vertices);
+  std::printf("| character | joints | vertices | levels (joints) | max error %% per level | "
+              "influences per vertex per level |\n|---|---|---|---|---|---|\n");
+  nlohmann::json report;
+  for (const CharacterType& type : types) {
+    std::string joints, errors, influences;
+    for (uint32_t l = 0; l < type.level_set.level_count(); ++l) {
+      const proto::LevelView& level = type.level_set.level(l);
+      char text[64];
+      joints += (l ? ", " : "") + std::to_string(level.kept_count());
+      std::snprintf(text, sizeof text, "%s%.2f", l ? ", " : "", level.figures().max_vertex_error_pct);
+      errors += text;
+      std::snprintf(text, sizeof text, "%s%.2f", l ? ", " : "", type.skins[l].mean_influences());
+      influences += text;
+    }
+    std::printf("| %s | %u | %zu | %s | %s | %s |\n", type.label.c_str(), type.level_set.joint_count(),
+                type.mesh.positions.size() / 3, joints.c_str(), errors.c_str(), influences.c_str());
+    report["characters"].push_back({{"name", type.label},
+                                    {"joints", type.level_set.joint_count()},
+                                    {"vertices", type.mesh.positions.size() / 3}});
+  }
+
+  const Quality quality = MeasureQuality(types, crowd, Mode::kMotionLod, o);
+  const Quality bound = MeasureQuality(types, crowd, Mode::kCoarsest, o);
+  std::printf("\nCharacters per level (last sampled frame, level 0 = every joint):");
+  for (size_t l = 0; l < quality.characters_per_level.size(); ++l)
+    std::printf(" L%zu %d", l, quality.characters_per_level[l]);
+  std::printf("\n\nScreen-space vertex error against full detail (every %dth frame, every vertex "
+              "of every character):\n\n| crowd | mean px | max px |\n|---|---|---|\n"
+              "| Motion LoD (budget %.2f px) | %.4f | %.3f |\n| coarsest level (bound) | %.4f | %.3f |\n\n",
+              kQualityEvery, o.budget_px, quality.mean_error_px, quality.max_error_px,
+              bound.mean_error_px, bound.max_error_px);
+  report["quality"] = {{"mean_error_px", quality.mean_error_px},
+                       {"max_error_px", quality.max_error_px},
+                       {"coarsest_mean_error_px", bound.mean_error_px},
+                       {"coarsest_max_error_px", bound.max_error_px},
+                       {"characters_per_level", quality.characters_per_level}};
+
+  std::printf("| threads | crowd | CPU ms/frame | speedup (CPU) | wall ms/frame | speedup (wall) | "
+              "matrix MB/frame | matrix update ms | skinning ms | output ms |\n"
+              "|---|---|---|---|---|---|---|---|---|---|\n");
+  for (int threads : o.threads) {
+    constexpr Mode kModes[] = {Mode::kFullDetail, Mode::kMotionLod, Mode::kCoarsest};
+    std::vector<RunResult> runs[3];  // by kModes, interleaved
+    for (int r = 0; r < o.repetitions; ++r) {
+      for (int m = 0; m < 3; ++m) runs[m].push_back(RunCrowd(types, crowd, vertex_buffer, kModes[m], threads, o));
+    }
+    const RunResult results[3] = {Median(runs[0]), Median(runs[1]), Median(runs[2])};
+    const RunResult& full = results[0];
+    for (const RunResult& result : results) {
+      const RunResult* run = &result;
+      char cpu_speedup[32] = "1", wall_speedup[32] = "1";
+      if (run->mode != Mode::kFullDetail) {
+        std::snprintf(cpu_speedup, sizeof cpu_speedup, "%.2fx",
+                      full.per_frame.total_s() / run->per_frame.total_s());
+        std::snprintf(wall_speedup, sizeof wall_speedup, "%.2fx", full.ms_per_frame / run->ms_per_frame);
+      }
+      std::printf("| %d | %s | %.2f | %s | %.2f | %s | %.3f | %.2f | %.2f | %.2f |\n", threads,
+                  ModeName(run->mode), run->per_frame.total_s() * 1e3, cpu_speedup,
+                  run->ms_per_frame, wall_speedup, run->per_frame.matrix_bytes / 1e6,
+                  run->per_frame.matrix_s * 1e3, run->per_frame.skinning_s * 1e3,
+                  run->per_frame.output_s * 1e3);
+      report["runs"].push_back({{"threads", threads},
+                                {"mode", ModeName(run->mode)},
+                                {"wall_ms_per_frame", run->ms_per_frame},
+                                {"cpu_ms_per_frame", run->per_frame.total_s() * 1e3},
+                                {"matrix_bytes_per_frame", run->per_frame.matrix_bytes},
+                                {"matrix_update_ms", run->per_frame.matrix_s * 1e3},
+                                {"skinning_ms", run->per_frame.skinning_s * 1e3},
+                                {"output_ms", run->per_frame.output_s * 1e3}});
+    }
+  }
+  std::printf("\n(CPU times are summed over the threads, per frame; medians of %d runs)\n",
+              o.repetitions);
+  if (!o.json_path.empty()) std::ofstream(o.json_path) << report.dump(2) << "\n";
+  return 0;
+}
+
+}  // namespace
+}  // namespace motionlod::bench
+
+int main(int argc, char** argv) { return motionlod::bench::Main(argc, argv); }

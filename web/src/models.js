@@ -1,0 +1,66 @@
+// Loading the glTF export of a bake's levels (GET /v1/bakes/{id}/levels/{joints}.glb),
+// and the level a pixel height selects from the bake's level table.
+import * as THREE from 'three';
+import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
+import { ApiError, authHeaders } from './api.js';
+
+const loader = new GLTFLoader();
+
+export function levelUrl(bakeId, joints) {
+  return `/v1/bakes/${bakeId}/levels/${joints}.glb`;
+}
+
+// Fetches a GLB from the daemon; failures become ApiErrors with the problem's detail.
+export async function fetchGlb(url) {
+  const response = await fetch(url, { headers: authHeaders() });
+  if (!response.ok) {
+    const body = await response.json().catch(() => null);
+    throw new ApiError(response.status, body?.title || response.statusText, body?.detail || '');
+  }
+  return response.arrayBuffer();
+}
+
+// A fresh scene graph from GLB bytes (each view needs its own).
+export function parseGlb(buffer) {
+  return new Promise((resolve, reject) =>
+    loader.parse(buffer, '', resolve, (error) =>
+      reject(new ApiError(0, 'unreadable glTF', String(error?.message || error))),
+    ),
+  );
+}
+
+// The joints of a loaded glTF's skins (the union over its skinned meshes).
+export function jointCount(gltf) {
+  const bones = new Set();
+  gltf.scene.traverse((object) => {
+    if (object.isSkinnedMesh) for (const bone of object.skeleton.bones) bones.add(bone);
+  });
+  return bones.size;
+}
+
+// The clip to play: the one named like the bake's animation, else the first.
+export function pickClip(gltf, animation) {
+  return gltf.animations.find((clip) => clip.name === animation) || gltf.animations[0] || null;
+}
+
+// Height (model units) and centre of the model's bind pose.
+export function measure(object) {
+  const box = new THREE.Box3().setFromObject(object);
+  const size = box.getSize(new THREE.Vector3());
+  return { box, size, height: Math.max(size.x, size.y, size.z), centre: box.getCenter(new THREE.Vector3()) };
+}
+
+// The level SelectLevel picks for a character `px` pixels tall with the default 1 px
+// budget: level l serves (px_min, px_max] (px_max null: unbounded); levels that are never
+// chosen serve nothing. Below every range: the coarsest chosen level.
+export function levelForPixels(levels, px) {
+  let coarsest = levels[levels.length - 1];
+  for (const level of levels) {
+    if (!level.chosen) continue;
+    coarsest = level;
+    if (px > level.px_min && (level.px_max === null || level.px_max === undefined || px <= level.px_max)) {
+      return level;
+    }
+  }
+  return coarsest;
+}
