@@ -1,0 +1,36 @@
+// One bake, or one skinning pass, of a file on one thread, for instruction counts under
+// callgrind (docs/PERFORMANCE.md, "Where the time goes"): the instructions of the bake
+// are those of main's callees less LoadAssetFile, comparable across commits whatever the
+// machine's load.
+//   motionlod_bench_bake_once FILE VARIANT [skin]
+#include <cstdio>
+#include <cstring>
+
+#include "io/asset.h"
+#include "pipeline/bake.h"
+
+int main(int argc, char** argv) {
+  using namespace motionlod;
+  if (argc < 3 || argc > 4 || (argc == 4 && std::strcmp(argv[3], "skin") != 0)) {
+    std::fprintf(stderr, "usage: motionlod_bench_bake_once FILE VARIANT [skin]\n");
+    return 2;
+  }
+  auto asset = io::LoadAssetFile(argv[1]);
+  auto variant = core::ParseVariant(argv[2]);
+  if (!asset.ok() || !variant.ok()) {
+    std::fprintf(stderr, "bake_once: %s\n",
+                 (!asset.ok() ? asset.status() : variant.status()).ToString().c_str());
+    return 2;
+  }
+  pipeline::BakeRequest request;
+  request.character = *std::move(asset);
+  request.settings.variant = *variant;
+  request.threads = 1;
+  request.measure_skinning_pass = false;
+  if (argc == 4) {
+    auto inputs = pipeline::PrepareInputs(request);
+    if (!inputs.ok()) return 1;
+    return pipeline::SkinningPassSeconds(*inputs->character, inputs->motion, 1) < 0;
+  }
+  return pipeline::Bake(request).ok() ? 0 : 1;
+}
