@@ -2,7 +2,9 @@
 // callgrind (docs/PERFORMANCE.md, "Where the time goes"): the instructions of the bake
 // are those of main's callees less LoadAssetFile, comparable across commits whatever the
 // machine's load.
-//   motionlod_bench_bake_once FILE VARIANT [skin]
+//   motionlod_bench_bake_once FILE VARIANT [skin|all]
+// "skin" runs the skinning pass instead; "all" bakes every level (all_levels) instead of
+// the default ladder.
 #include <cstdio>
 #include <cstring>
 
@@ -11,8 +13,10 @@
 
 int main(int argc, char** argv) {
   using namespace motionlod;
-  if (argc < 3 || argc > 4 || (argc == 4 && std::strcmp(argv[3], "skin") != 0)) {
-    std::fprintf(stderr, "usage: motionlod_bench_bake_once FILE VARIANT [skin]\n");
+  const bool skin = argc == 4 && std::strcmp(argv[3], "skin") == 0;
+  const bool all_levels = argc == 4 && std::strcmp(argv[3], "all") == 0;
+  if (argc < 3 || argc > 4 || (argc == 4 && !skin && !all_levels)) {
+    std::fprintf(stderr, "usage: motionlod_bench_bake_once FILE VARIANT [skin|all]\n");
     return 2;
   }
   auto asset = io::LoadAssetFile(argv[1]);
@@ -27,7 +31,8 @@ int main(int argc, char** argv) {
   request.settings.variant = *variant;
   request.threads = 1;
   request.measure_skinning_pass = false;
-  if (argc == 4) {
+  request.all_levels = all_levels;
+  if (skin) {
     auto inputs = pipeline::PrepareInputs(request);
     if (!inputs.ok()) return 1;
     return pipeline::SkinningPassSeconds(*inputs->character, inputs->motion, 1) < 0;

@@ -49,6 +49,48 @@ constexpr bool kAddressSpaceLimitWorks = !__has_feature(address_sanitizer);
 constexpr bool kAddressSpaceLimitWorks = true;
 #endif
 
+// The guardian's bubblewrap, for its signal handler (one per guardian process, which
+// runs nothing else: the variable is never shared between threads).
+volatile pid_t guarded_sandbox = 0;
+
+void KillSandboxAndExit(int) {
+  if (guarded_sandbox > 0) kill(guarded_sandbox, SIGKILL);
+  _exit(128 + SIGKILL);
+}
+
+// Runs in the forked child: execs `argv` through a guardian process. bubblewrap clears the
+// parent-death signal while it sets the sandbox up (it changes its credentials), so a
+// daemon killed in those milliseconds would leave bubblewrap and the worker running. The
+// guardian keeps a catchable parent-death signal, kills bubblewrap when the daemon dies,
+// and otherwise ends as bubblewrap ended (same exit code or signal), so the daemon reads
+// the worker's fate as before and wait4 sums every process's CPU time.
+[[noreturn]] void ExecGuarded(char* const argv[], char* const environment[], pid_t daemon_pid) {
+  struct sigaction on_death = {};
+  on_death.sa_handler = KillSandboxAndExit;
+  sigaction(SIGTERM, &on_death, nullptr);
+  prctl(PR_SET_PDEATHSIG, SIGTERM);
+  if (getppid() != daemon_pid) _exit(127);
+  const pid_t guardian = getpid();
+  const pid_t sandbox = fork();
+  if (sandbox == 0) {
+    prctl(PR_SET_PDEATHSIG, SIGKILL);
+    if (getppid() != guardian) _exit(127);
+    execve(argv[0], argv, environment);
+    _exit(127);
+  }
+  if (sandbox < 0) _exit(127);
+  guarded_sandbox = sandbox;
+  int status = 0;
+  while (waitpid(sandbox, &status, 0) < 0) {
+    if (errno != EINTR) _exit(127);
+  }
+  if (WIFEXITED(status)) _exit(WEXITSTATUS(status));
+  const int signal_number = WTERMSIG(status);
+  signal(signal_number, SIG_DFL);
+  kill(getpid(), signal_number);
+  _exit(128 + signal_number);
+}
+
 std::string FindOnPath(const std::string& name) {
   const char* path = std::getenv("PATH");
   std::stringstream dirs(path != nullptr && *path != '\0' ? path : "/usr/bin:/bin");
@@ -226,6 +268,7 @@ StatusOr<std::shared_ptr<const io::Asset>> ImportSandbox::Run(
     setrlimit(RLIMIT_CPU, &cpu);
     setrlimit(RLIMIT_CORE, &no_core);
     if (limit_memory) setrlimit(RLIMIT_AS, &memory);
+    if (isolation_ == Isolation::kBubblewrap) ExecGuarded(argv.data(), empty_environment, daemon_pid);
     execve(argv[0], argv.data(), empty_environment);
     _exit(127);
   }
