@@ -11,7 +11,6 @@
 #include <spdlog/spdlog.h>
 
 #include <atomic>
-#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -98,9 +97,14 @@ void Seed(Service& service, const Options& options, const std::string& base_url)
     for (const proto::api::LevelEntry& level : bake->levels) {
       std::string drawn = "never (a coarser level is as good)";
       if (level.chosen) {
-        drawn =
-            "for heights above " + std::to_string(std::lround(level.px_min)) + " px" +
-            (level.px_max ? " up to " + std::to_string(std::lround(*level.px_max)) + " px" : "");
+        char range[96];
+        if (level.px_max) {
+          std::snprintf(range, sizeof range, "for heights above %.1f px up to %.1f px",
+                        level.px_min, *level.px_max);
+        } else {
+          std::snprintf(range, sizeof range, "for heights above %.1f px", level.px_min);
+        }
+        drawn = range;
       }
       std::printf("  level %d: %2d joints, max error %.3f%% of the height, %s: %s/v1/levels/%s\n",
                   level.index, level.joints, level.max_vertex_error_pct, drawn.c_str(),
