@@ -4,7 +4,8 @@
 
 #include <string>
 #include <utility>
-#include <variant>
+
+#include "base/expected.h"
 
 namespace motionlod {
 
@@ -51,26 +52,15 @@ inline Status Unsupported(std::string message) {
 
 // A value or the Status that explains why there is none.
 template <typename T>
-class [[nodiscard]] StatusOr {
+class [[nodiscard]] StatusOr : public Expected<T, Status> {
  public:
-  StatusOr(T value) : value_(std::move(value)) {}            // NOLINT: implicit by design
-  StatusOr(Status status) : value_(std::move(status)) {}     // NOLINT: implicit by design
+  using Expected<T, Status>::Expected;
 
-  bool ok() const { return std::holds_alternative<T>(value_); }
+  // The error, or an OK status when there is a value (so that it forwards either).
   const Status& status() const {
     static const Status kOkStatus;
-    return ok() ? kOkStatus : std::get<Status>(value_);
+    return this->ok() ? kOkStatus : this->error();
   }
-  T& value() & { return std::get<T>(value_); }
-  const T& value() const& { return std::get<T>(value_); }
-  T&& value() && { return std::get<T>(std::move(value_)); }
-  T* operator->() { return &value(); }
-  const T* operator->() const { return &value(); }
-  T& operator*() & { return value(); }
-  const T& operator*() const& { return value(); }
-
- private:
-  std::variant<T, Status> value_;
 };
 
 }  // namespace motionlod

@@ -22,6 +22,14 @@ Error MakeError(ErrorKind kind, std::string message) {
   return Error{kind, 0, std::nullopt, std::move(message)};
 }
 
+// A reply body as a T, or kDataLoss naming the request (`what`).
+template <typename T>
+Result<T> ParseBody(const std::string& body, const std::string& what) {
+  auto parsed = api::ParseReply<T>(body);
+  if (!parsed.ok()) return MakeError(ErrorKind::kDataLoss, what + ": " + parsed.status().message());
+  return std::move(*parsed);
+}
+
 // RFC 3986 unreserved characters stay, everything else is %XX.
 std::string UrlEncode(std::string_view text) {
   static constexpr char kHex[] = "0123456789ABCDEF";
@@ -191,17 +199,22 @@ Result<HttpResponse> Client::Send(HttpRequest request) {
   }
 }
 
-template <typename T>
-Result<T> Client::Call(HttpRequest request, std::initializer_list<int> expected) {
-  const std::string what = request.method + " " + request.target;
+Result<HttpResponse> Client::SendExpecting(HttpRequest request, std::initializer_list<int> expected,
+                                           const std::string& what) {
   Result<HttpResponse> response = Send(std::move(request));
-  if (!response.ok()) return response.error();
+  if (!response.ok()) return response;
   if (std::find(expected.begin(), expected.end(), response->status) == expected.end()) {
     return ErrorFromResponse(*response, what);
   }
-  auto parsed = api::ParseReply<T>(response->body);
-  if (!parsed.ok()) return MakeError(ErrorKind::kDataLoss, what + ": " + parsed.status().message());
-  return std::move(*parsed);
+  return response;
+}
+
+template <typename T>
+Result<T> Client::Call(HttpRequest request, std::initializer_list<int> expected) {
+  const std::string what = request.method + " " + request.target;
+  Result<HttpResponse> response = SendExpecting(std::move(request), expected, what);
+  if (!response.ok()) return response.error();
+  return ParseBody<T>(response->body, what);
 }
 
 namespace {
@@ -238,12 +251,10 @@ Result<Uploaded<api::CharacterInfo>> Client::UploadCharacter(const std::vector<U
   HttpRequest request;
   if (auto error = BuildUpload(files, "/v1/characters", request)) return *error;
   const std::string what = "POST /v1/characters";
-  Result<HttpResponse> response = Send(std::move(request));
+  Result<HttpResponse> response = SendExpecting(std::move(request), {200, 201}, what);
   if (!response.ok()) return response.error();
-  if (response->status != 200 && response->status != 201) return ErrorFromResponse(*response, what);
-  auto character = api::ParseReply<api::CharacterInfo>(response->body);
-  if (!character.ok())
-    return MakeError(ErrorKind::kDataLoss, what + ": " + character.status().message());
+  auto character = ParseBody<api::CharacterInfo>(response->body, what);
+  if (!character.ok()) return character.error();
   return Uploaded<api::CharacterInfo>{std::move(*character), response->status == 201};
 }
 
@@ -254,14 +265,13 @@ Result<Uploaded<std::vector<api::MotionInfo>>> Client::UploadMotion(
   if (auto error = BuildUpload(files, "/v1/motions?character=" + character_id, request))
     return *error;
   const std::string what = "POST /v1/motions";
-  Result<HttpResponse> response = Send(std::move(request));
+  Result<HttpResponse> response = SendExpecting(std::move(request), {200, 201}, what);
   if (!response.ok()) return response.error();
-  if (response->status != 200 && response->status != 201) return ErrorFromResponse(*response, what);
   const json body = json::parse(response->body, nullptr, /*allow_exceptions=*/false);
   if (!body.is_object() || !body.contains("motions"))
     return MakeError(ErrorKind::kDataLoss, what + ": the reply has no 'motions' list");
-  auto motions = api::ParseReply<std::vector<api::MotionInfo>>(body["motions"].dump());
-  if (!motions.ok()) return MakeError(ErrorKind::kDataLoss, what + ": " + motions.status().message());
+  auto motions = ParseBody<std::vector<api::MotionInfo>>(body["motions"].dump(), what);
+  if (!motions.ok()) return motions.error();
   return Uploaded<std::vector<api::MotionInfo>>{std::move(*motions), response->status == 201};
 }
 

@@ -125,6 +125,10 @@ class Client {
   Client(ClientOptions options, std::unique_ptr<HttpConnection> connection);
   // Sends with the key, retrying 503 and connection failures per the policy.
   Result<HttpResponse> Send(HttpRequest request);
+  // Sends, then the reply when its status is one of `expected` and its Error otherwise
+  // (`what` names the request in the message).
+  Result<HttpResponse> SendExpecting(HttpRequest request, std::initializer_list<int> expected,
+                                     const std::string& what);
   template <typename T>
   Result<T> Call(HttpRequest request, std::initializer_list<int> expected);
 

@@ -5,9 +5,8 @@
 
 #include <optional>
 #include <string>
-#include <utility>
-#include <variant>
 
+#include "base/expected.h"
 #include "proto/api.h"
 
 namespace motionlod::client {
@@ -38,23 +37,6 @@ struct Error {
 
 // A value or the Error that explains why there is none.
 template <typename T>
-class [[nodiscard]] Result {
- public:
-  Result(T value) : value_(std::move(value)) {}      // NOLINT: implicit by design
-  Result(Error error) : value_(std::move(error)) {}  // NOLINT: implicit by design
-
-  bool ok() const { return std::holds_alternative<T>(value_); }
-  const Error& error() const { return std::get<Error>(value_); }
-  T& value() & { return std::get<T>(value_); }
-  const T& value() const& { return std::get<T>(value_); }
-  T&& value() && { return std::get<T>(std::move(value_)); }
-  T* operator->() { return &value(); }
-  const T* operator->() const { return &value(); }
-  T& operator*() & { return value(); }
-  const T& operator*() const& { return value(); }
-
- private:
-  std::variant<T, Error> value_;
-};
+using Result = Expected<T, Error>;
 
 }  // namespace motionlod::client

@@ -53,6 +53,25 @@ ServiceError Internal(const Status& status) {
   return Error(ErrorKind::kInternal, "internal error; see the daemon's log");
 }
 
+// The 404 for an id that cannot name anything (not 64 lower-case hex digits), answered
+// before any lookup.
+ServiceError MalformedId(const std::string& what) {
+  return Error(ErrorKind::kNotFound, "no " + what + " with that id (ids are 64 hex digits)");
+}
+
+// The record that `get`, a Store getter, finds under `id` (a character, motion, bake or
+// job): 404 for an id that is malformed or names nothing, 500 when the store fails.
+template <typename Record>
+Result<Record> FindRecord(Store& store,
+                          StatusOr<std::optional<Record>> (Store::*get)(const std::string&),
+                          const std::string& what, const std::string& id) {
+  if (!api::IsContentId(id)) return MalformedId(what);
+  auto record = (store.*get)(id);
+  if (!record.ok()) return Internal(record.status());
+  if (!record->has_value()) return Error(ErrorKind::kNotFound, "no " + what + " " + id);
+  return std::move(**record);
+}
+
 // An importer or core failure on uploaded content.
 ServiceError ImportError(const Status& status) {
   if (status.code() == StatusCode::kUnsupported)
@@ -72,6 +91,18 @@ Status ValidateFileName(const std::string& name) {
       return InvalidArgument(
           "file names must be plain names: no directories or control characters");
     }
+  }
+  return Status::Ok();
+}
+
+// The files of one upload: at least one, each with a plain name, no two named alike.
+Status ValidateUploadFiles(const std::vector<io::SourceFile>& files) {
+  if (files.empty()) return InvalidArgument("the upload holds no file");
+  std::set<std::string> names;
+  for (const io::SourceFile& f : files) {
+    if (Status status = ValidateFileName(f.name); !status.ok()) return status;
+    if (!names.insert(f.name).second)
+      return InvalidArgument("two parts are named '" + f.name + "'");
   }
   return Status::Ok();
 }
@@ -353,10 +384,9 @@ api::JobStatus Service::ToStatus(const JobRecord& r, uint64_t version) const {
 }
 
 Result<api::JobStatus> Service::JobFromStore(const std::string& id) {
-  auto job = store_->GetJob(id);
-  if (!job.ok()) return Internal(job.status());
-  if (!job->has_value()) return Error(ErrorKind::kNotFound, "no job " + id);
-  return ToStatus(**job, 0);
+  auto job = FindRecord(*store_, &Store::GetJob, "job", id);
+  if (!job.ok()) return job.error();
+  return ToStatus(*job, 0);
 }
 
 StatusOr<std::shared_ptr<const io::Asset>> Service::LoadSource(
@@ -421,14 +451,8 @@ void Service::CollectBlobs(const std::vector<std::string>& blobs) {
 // Characters and motions
 
 Result<Created<api::CharacterInfo>> Service::UploadCharacter(std::vector<io::SourceFile> files) {
-  if (files.empty()) return Error(ErrorKind::kBadRequest, "the upload holds no file");
-  std::set<std::string> names;
-  for (const io::SourceFile& f : files) {
-    if (Status status = ValidateFileName(f.name); !status.ok())
-      return Error(ErrorKind::kBadRequest, status.message());
-    if (!names.insert(f.name).second)
-      return Error(ErrorKind::kBadRequest, "two parts are named '" + f.name + "'");
-  }
+  if (Status status = ValidateUploadFiles(files); !status.ok())
+    return Error(ErrorKind::kBadRequest, status.message());
   const std::string id = UploadId(files);
   auto existing = store_->GetCharacter(id);
   if (!existing.ok()) return Internal(existing.status());
@@ -485,14 +509,11 @@ Result<Created<api::CharacterInfo>> Service::UploadCharacter(std::vector<io::Sou
 }
 
 Result<api::CharacterInfo> Service::GetCharacter(const std::string& id) {
-  if (!api::IsContentId(id))
-    return Error(ErrorKind::kNotFound, "no character with that id (ids are 64 hex digits)");
-  auto record = store_->GetCharacter(id);
-  if (!record.ok()) return Internal(record.status());
-  if (!record->has_value()) return Error(ErrorKind::kNotFound, "no character " + id);
+  auto record = FindRecord(*store_, &Store::GetCharacter, "character", id);
+  if (!record.ok()) return record.error();
   auto motions = store_->ListMotions(id);
   if (!motions.ok()) return Internal(motions.status());
-  return ToCharacterInfo(**record, *motions);
+  return ToCharacterInfo(*record, *motions);
 }
 
 Result<std::vector<api::CharacterInfo>> Service::ListCharacters() {
@@ -508,8 +529,7 @@ Result<std::vector<api::CharacterInfo>> Service::ListCharacters() {
 }
 
 Result<Done> Service::DeleteCharacter(const std::string& id) {
-  if (!api::IsContentId(id))
-    return Error(ErrorKind::kNotFound, "no character with that id (ids are 64 hex digits)");
+  if (!api::IsContentId(id)) return MalformedId("character");
   auto bakes = store_->ListBakes(id);
   if (!bakes.ok()) return Internal(bakes.status());
   auto blobs = store_->DeleteCharacter(id);
@@ -546,23 +566,16 @@ Result<Created<std::vector<api::MotionInfo>>> Service::UploadMotion(
     return Error(ErrorKind::kBadRequest,
                  "?character= must be a character id (64 lower-case hex digits)");
   }
-  auto character = store_->GetCharacter(character_id);
-  if (!character.ok()) return Internal(character.status());
-  if (!character->has_value()) return Error(ErrorKind::kNotFound, "no character " + character_id);
-  if (files.empty()) return Error(ErrorKind::kBadRequest, "the upload holds no file");
-  std::set<std::string> names;
-  for (const io::SourceFile& f : files) {
-    if (Status status = ValidateFileName(f.name); !status.ok())
-      return Error(ErrorKind::kBadRequest, status.message());
-    if (!names.insert(f.name).second)
-      return Error(ErrorKind::kBadRequest, "two parts are named '" + f.name + "'");
-  }
+  auto character = FindRecord(*store_, &Store::GetCharacter, "character", character_id);
+  if (!character.ok()) return character.error();
+  if (Status status = ValidateUploadFiles(files); !status.ok())
+    return Error(ErrorKind::kBadRequest, status.message());
   const std::string source_id = UploadId(files);
   ImportSlot slot(imports_, config_.max_concurrent_imports);
   if (!slot.acquired()) {
     return Error(ErrorKind::kUnavailable, "too many uploads are being imported; retry shortly", 2);
   }
-  auto target = LoadSource(character_id, (*character)->files);
+  auto target = LoadSource(character_id, character->files);
   if (!target.ok()) return Internal(target.status());
   auto asset = Import(files);
   if (!asset.ok()) return ImportError(asset.status());
@@ -619,20 +632,16 @@ Result<Created<std::vector<api::MotionInfo>>> Service::UploadMotion(
 }
 
 Result<api::MotionInfo> Service::GetMotion(const std::string& id) {
-  if (!api::IsContentId(id))
-    return Error(ErrorKind::kNotFound, "no motion with that id (ids are 64 hex digits)");
-  auto motion = store_->GetMotion(id);
-  if (!motion.ok()) return Internal(motion.status());
-  if (!motion->has_value()) return Error(ErrorKind::kNotFound, "no motion " + id);
-  return ToMotionInfo(**motion);
+  auto motion = FindRecord(*store_, &Store::GetMotion, "motion", id);
+  if (!motion.ok()) return motion.error();
+  return ToMotionInfo(*motion);
 }
 
 Result<std::vector<api::MotionInfo>> Service::ListMotions(const std::string& character_id) {
   if (!api::IsContentId(character_id))
     return Error(ErrorKind::kNotFound, "no character with that id");
-  auto character = store_->GetCharacter(character_id);
-  if (!character.ok()) return Internal(character.status());
-  if (!character->has_value()) return Error(ErrorKind::kNotFound, "no character " + character_id);
+  auto character = FindRecord(*store_, &Store::GetCharacter, "character", character_id);
+  if (!character.ok()) return character.error();
   auto motions = store_->ListMotions(character_id);
   if (!motions.ok()) return Internal(motions.status());
   std::vector<api::MotionInfo> list;
@@ -645,11 +654,9 @@ Result<std::vector<api::MotionInfo>> Service::ListMotions(const std::string& cha
 
 Result<Created<api::JobStatus>> Service::SubmitBake(const api::BakeRequest& request) {
   if (draining_) return Error(ErrorKind::kUnavailable, "the daemon is shutting down", 5);
-  auto character = store_->GetCharacter(request.character);
-  if (!character.ok()) return Internal(character.status());
-  if (!character->has_value())
-    return Error(ErrorKind::kNotFound, "no character " + request.character);
-  const CharacterRecord& c = **character;
+  auto character = FindRecord(*store_, &Store::GetCharacter, "character", request.character);
+  if (!character.ok()) return character.error();
+  const CharacterRecord& c = *character;
   auto motions = store_->ListMotions(c.id);
   if (!motions.ok()) return Internal(motions.status());
 
@@ -782,8 +789,7 @@ Result<Created<api::JobStatus>> Service::SubmitBake(const api::BakeRequest& requ
 }
 
 Result<api::JobStatus> Service::GetJob(const std::string& id) {
-  if (!api::IsContentId(id))
-    return Error(ErrorKind::kNotFound, "no job with that id (ids are 64 hex digits)");
+  if (!api::IsContentId(id)) return MalformedId("job");
   {
     std::lock_guard lock(board_mutex_);
     if (auto found = board_.find(id); found != board_.end()) {
@@ -795,8 +801,7 @@ Result<api::JobStatus> Service::GetJob(const std::string& id) {
 
 Result<api::JobStatus> Service::WaitJob(const std::string& id, uint64_t after_version,
                                         double seconds) {
-  if (!api::IsContentId(id))
-    return Error(ErrorKind::kNotFound, "no job with that id (ids are 64 hex digits)");
+  if (!api::IsContentId(id)) return MalformedId("job");
   const auto deadline =
       std::chrono::steady_clock::now() +
       std::chrono::milliseconds(static_cast<int64_t>(std::max(0.0, seconds) * 1000));
@@ -1035,12 +1040,9 @@ Result<api::BakeInfo> Service::ToBakeInfo(const BakeRecord& bake) {
 }
 
 Result<api::BakeInfo> Service::GetBake(const std::string& id) {
-  if (!api::IsContentId(id))
-    return Error(ErrorKind::kNotFound, "no bake with that id (ids are 64 hex digits)");
-  auto bake = store_->GetBake(id);
-  if (!bake.ok()) return Internal(bake.status());
-  if (!bake->has_value()) return Error(ErrorKind::kNotFound, "no bake " + id);
-  return ToBakeInfo(**bake);
+  auto bake = FindRecord(*store_, &Store::GetBake, "bake", id);
+  if (!bake.ok()) return bake.error();
+  return ToBakeInfo(*bake);
 }
 
 Result<std::vector<api::BakeInfo>> Service::ListBakes(const std::string& character_id) {
@@ -1061,22 +1063,18 @@ Result<std::vector<api::BakeInfo>> Service::ListBakes(const std::string& charact
 }
 
 Result<std::string> Service::GetReport(const std::string& bake_id) {
-  if (!api::IsContentId(bake_id))
-    return Error(ErrorKind::kNotFound, "no bake with that id (ids are 64 hex digits)");
-  auto bake = store_->GetBake(bake_id);
-  if (!bake.ok()) return Internal(bake.status());
-  if (!bake->has_value()) return Error(ErrorKind::kNotFound, "no bake " + bake_id);
-  if ((*bake)->report_json.empty()) {
+  auto bake = FindRecord(*store_, &Store::GetBake, "bake", bake_id);
+  if (!bake.ok()) return bake.error();
+  if (bake->report_json.empty()) {
     auto job = GetJob(bake_id);
     return Error(ErrorKind::kConflict, "bake " + bake_id + " has not succeeded (state: " +
                                            (job.ok() ? job->state : std::string("unknown")) + ")");
   }
-  return (*bake)->report_json;
+  return std::move(bake->report_json);
 }
 
 Result<Done> Service::DeleteBake(const std::string& id) {
-  if (!api::IsContentId(id))
-    return Error(ErrorKind::kNotFound, "no bake with that id (ids are 64 hex digits)");
+  if (!api::IsContentId(id)) return MalformedId("bake");
   auto blobs = store_->DeleteBake(id);
   if (!blobs.ok()) {
     if (blobs.status().code() == StatusCode::kNotFound)
@@ -1103,8 +1101,7 @@ Result<Done> Service::DeleteBake(const std::string& id) {
 
 Result<api::LevelChoice> Service::ChooseLevel(const std::string& bake_id, double px,
                                               double budget_px) {
-  if (!api::IsContentId(bake_id))
-    return Error(ErrorKind::kNotFound, "no bake with that id (ids are 64 hex digits)");
+  if (!api::IsContentId(bake_id)) return MalformedId("bake");
   if (!(px > 0) || !std::isfinite(px) || px > 1e6) {
     return Error(ErrorKind::kBadRequest,
                  "px (the character's on-screen height in pixels) must be in (0, 1e6]");
@@ -1161,18 +1158,15 @@ Result<LevelCache::Bytes> Service::GetLevel(const std::string& hash) {
 }
 
 Result<BakeRecord> Service::BakeWithLevels(const std::string& bake_id) {
-  if (!api::IsContentId(bake_id))
-    return Error(ErrorKind::kNotFound, "no bake with that id (ids are 64 hex digits)");
-  auto bake = store_->GetBake(bake_id);
-  if (!bake.ok()) return Internal(bake.status());
-  if (!bake->has_value()) return Error(ErrorKind::kNotFound, "no bake " + bake_id);
-  if ((*bake)->level_set.empty()) {
+  auto bake = FindRecord(*store_, &Store::GetBake, "bake", bake_id);
+  if (!bake.ok()) return bake.error();
+  if (bake->level_set.empty()) {
     auto job = GetJob(bake_id);
     return Error(ErrorKind::kConflict, "bake " + bake_id + " has no levels yet (state: " +
                                            (job.ok() ? job->state : std::string("unknown")) +
                                            "); wait on /v1/jobs/" + bake_id);
   }
-  return std::move(**bake);
+  return bake;
 }
 
 Result<Service::GltfFile> Service::GetLevelGltf(const std::string& bake_id, int joints) {
@@ -1202,10 +1196,9 @@ Result<Service::GltfFile> Service::GetLevelGltf(const std::string& bake_id, int 
   if ((file.glb = cache_.Get(file.key))) return file;
   auto one_level = GetLevel(level->hash);
   if (!one_level.ok()) return one_level.error();
-  auto character = store_->GetCharacter(bake->character_id);
-  if (!character.ok()) return Internal(character.status());
-  if (!character->has_value()) return Error(ErrorKind::kNotFound, "no character " + bake->character_id);
-  auto asset = LoadSource((*character)->id, (*character)->files);
+  auto character = FindRecord(*store_, &Store::GetCharacter, "character", bake->character_id);
+  if (!character.ok()) return character.error();
+  auto asset = LoadSource(character->id, character->files);
   if (!asset.ok()) return Internal(asset.status());
   auto exported = pipeline::ExportLevelGltf(**asset, *one_level.value(), joints, animation);
   if (!exported.ok()) return Internal(exported.status());

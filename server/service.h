@@ -22,9 +22,9 @@
 #include <optional>
 #include <shared_mutex>
 #include <string>
-#include <variant>
 #include <vector>
 
+#include "base/expected.h"
 #include "io/asset.h"
 #include "pipeline/bake.h"
 #include "proto/api.h"
@@ -57,20 +57,7 @@ struct ServiceError {
 
 // A value or the ServiceError that explains why there is none.
 template <typename T>
-class Result {
- public:
-  Result(T value) : value_(std::move(value)) {}             // NOLINT: implicit by design
-  Result(ServiceError error) : value_(std::move(error)) {}  // NOLINT: implicit by design
-  bool ok() const { return std::holds_alternative<T>(value_); }
-  const ServiceError& error() const { return std::get<ServiceError>(value_); }
-  T& value() { return std::get<T>(value_); }
-  const T& value() const { return std::get<T>(value_); }
-  T* operator->() { return &value(); }
-  const T* operator->() const { return &value(); }
-
- private:
-  std::variant<T, ServiceError> value_;
-};
+using Result = Expected<T, ServiceError>;
 
 template <typename T>
 struct Created {

@@ -4,6 +4,7 @@
 
 #include <nlohmann/json.hpp>
 #include <set>
+#include <type_traits>
 
 namespace motionlod::server {
 namespace {
@@ -51,6 +52,32 @@ class Statement {
     const int rc = Step();
     if (rc != SQLITE_DONE && rc != SQLITE_ROW) return SqlError(db_, what);
     return Status::Ok();
+  }
+  // Calls `row(*this)` on every row; `what` names the query in errors.
+  template <typename Row>
+  Status ForEachRow(const char* what, Row row) {
+    while (true) {
+      const int rc = Step();
+      if (rc == SQLITE_DONE) return Status::Ok();
+      if (rc != SQLITE_ROW) return SqlError(db_, what);
+      row(*this);
+    }
+  }
+  // Every row, each read by `read(*this)`.
+  template <typename Read, typename Record = std::invoke_result_t<Read&, const Statement&>>
+  StatusOr<std::vector<Record>> ReadAll(const char* what, Read read) {
+    std::vector<Record> records;
+    Status status = ForEachRow(what, [&](const Statement& row) { records.push_back(read(row)); });
+    if (!status.ok()) return status;
+    return records;
+  }
+  // The first row read by `read(*this)`, or none when there is no row.
+  template <typename Read, typename Record = std::invoke_result_t<Read&, const Statement&>>
+  StatusOr<std::optional<Record>> ReadOne(const char* what, Read read) {
+    const int rc = Step();
+    if (rc == SQLITE_ROW) return std::optional<Record>(read(*this));
+    if (rc == SQLITE_DONE) return std::optional<Record>();
+    return SqlError(db_, what);
   }
   std::string Text(int column) const {
     const auto* text = reinterpret_cast<const char*>(sqlite3_column_text(stmt_, column));
@@ -206,21 +233,13 @@ std::string Sql(const char* head, const char* columns, const char* tail) {
 Status CollectBakeBlobs(sqlite3* db, const std::string& bake_id, std::set<std::string>& blobs) {
   Statement bake(db, "SELECT level_set FROM bakes WHERE id = ?");
   bake.Bind(1, bake_id);
-  while (true) {
-    const int rc = bake.Step();
-    if (rc == SQLITE_DONE) break;
-    if (rc != SQLITE_ROW) return SqlError(db, "read bake");
-    if (!bake.Text(0).empty()) blobs.insert(bake.Text(0));
-  }
+  Status status = bake.ForEachRow("read bake", [&](const Statement& row) {
+    if (!row.Text(0).empty()) blobs.insert(row.Text(0));
+  });
+  if (!status.ok()) return status;
   Statement levels(db, "SELECT hash FROM levels WHERE bake_id = ?");
   levels.Bind(1, bake_id);
-  while (true) {
-    const int rc = levels.Step();
-    if (rc == SQLITE_DONE) break;
-    if (rc != SQLITE_ROW) return SqlError(db, "read levels");
-    blobs.insert(levels.Text(0));
-  }
-  return Status::Ok();
+  return levels.ForEachRow("read levels", [&](const Statement& row) { blobs.insert(row.Text(0)); });
 }
 
 }  // namespace
@@ -357,23 +376,14 @@ StatusOr<std::optional<CharacterRecord>> Store::GetCharacter(const std::string& 
   std::lock_guard lock(mutex_);
   Statement select(db_, Sql("SELECT ", kCharacterColumns, " FROM characters WHERE id = ?").c_str());
   select.Bind(1, id);
-  const int rc = select.Step();
-  if (rc == SQLITE_ROW) return std::optional<CharacterRecord>(ReadCharacter(select));
-  if (rc == SQLITE_DONE) return std::optional<CharacterRecord>();
-  return SqlError(db_, "read character");
+  return select.ReadOne("read character", ReadCharacter);
 }
 
 StatusOr<std::vector<CharacterRecord>> Store::ListCharacters() {
   std::lock_guard lock(mutex_);
   Statement select(
       db_, Sql("SELECT ", kCharacterColumns, " FROM characters ORDER BY created_ms, id").c_str());
-  std::vector<CharacterRecord> list;
-  while (true) {
-    const int rc = select.Step();
-    if (rc == SQLITE_DONE) return list;
-    if (rc != SQLITE_ROW) return SqlError(db_, "list characters");
-    list.push_back(ReadCharacter(select));
-  }
+  return select.ReadAll("list characters", ReadCharacter);
 }
 
 StatusOr<std::vector<std::string>> Store::DeleteCharacter(const std::string& id) {
@@ -392,24 +402,17 @@ StatusOr<std::vector<std::string>> Store::DeleteCharacter(const std::string& id)
   {
     Statement motions(db_, "SELECT files FROM motions WHERE character_id = ?");
     motions.Bind(1, id);
-    while (true) {
-      const int rc = motions.Step();
-      if (rc == SQLITE_DONE) break;
-      if (rc != SQLITE_ROW) return SqlError(db_, "read motions");
-      for (const FileRecord& f : FilesFromJson(motions.Text(0))) blobs.insert(f.blob);
-    }
+    Status status = motions.ForEachRow("read motions", [&](const Statement& row) {
+      for (const FileRecord& f : FilesFromJson(row.Text(0))) blobs.insert(f.blob);
+    });
+    if (!status.ok()) return status;
   }
   {
-    std::vector<std::string> bake_ids;
     Statement bakes(db_, "SELECT id FROM bakes WHERE character_id = ?");
     bakes.Bind(1, id);
-    while (true) {
-      const int rc = bakes.Step();
-      if (rc == SQLITE_DONE) break;
-      if (rc != SQLITE_ROW) return SqlError(db_, "read bakes");
-      bake_ids.push_back(bakes.Text(0));
-    }
-    for (const std::string& bake : bake_ids) {
+    auto bake_ids = bakes.ReadAll("read bakes", [](const Statement& row) { return row.Text(0); });
+    if (!bake_ids.ok()) return bake_ids.status();
+    for (const std::string& bake : *bake_ids) {
       if (Status status = CollectBakeBlobs(db_, bake, blobs); !status.ok()) return status;
     }
   }
@@ -448,10 +451,7 @@ StatusOr<std::optional<MotionRecord>> Store::GetMotion(const std::string& id) {
   std::lock_guard lock(mutex_);
   Statement select(db_, Sql("SELECT ", kMotionColumns, " FROM motions WHERE id = ?").c_str());
   select.Bind(1, id);
-  const int rc = select.Step();
-  if (rc == SQLITE_ROW) return std::optional<MotionRecord>(ReadMotion(select));
-  if (rc == SQLITE_DONE) return std::optional<MotionRecord>();
-  return SqlError(db_, "read motion");
+  return select.ReadOne("read motion", ReadMotion);
 }
 
 StatusOr<std::vector<MotionRecord>> Store::ListMotions(const std::string& character_id) {
@@ -461,13 +461,7 @@ StatusOr<std::vector<MotionRecord>> Store::ListMotions(const std::string& charac
                " FROM motions WHERE character_id = ? ORDER BY source = 'file', created_ms, rowid")
                .c_str());
   select.Bind(1, character_id);
-  std::vector<MotionRecord> list;
-  while (true) {
-    const int rc = select.Step();
-    if (rc == SQLITE_DONE) return list;
-    if (rc != SQLITE_ROW) return SqlError(db_, "list motions");
-    list.push_back(ReadMotion(select));
-  }
+  return select.ReadAll("list motions", ReadMotion);
 }
 
 StatusOr<bool> Store::InsertBakeAndJob(const BakeRecord& bake, const JobRecord& job) {
@@ -496,10 +490,7 @@ StatusOr<std::optional<BakeRecord>> Store::GetBake(const std::string& id) {
   std::lock_guard lock(mutex_);
   Statement select(db_, Sql("SELECT ", kBakeColumns, " FROM bakes WHERE id = ?").c_str());
   select.Bind(1, id);
-  const int rc = select.Step();
-  if (rc == SQLITE_ROW) return std::optional<BakeRecord>(ReadBake(select));
-  if (rc == SQLITE_DONE) return std::optional<BakeRecord>();
-  return SqlError(db_, "read bake");
+  return select.ReadOne("read bake", ReadBake);
 }
 
 StatusOr<std::vector<BakeRecord>> Store::ListBakes(const std::string& character_id) {
@@ -509,15 +500,11 @@ StatusOr<std::vector<BakeRecord>> Store::ListBakes(const std::string& character_
                        " FROM bakes WHERE ?1 = '' OR character_id = ?1 ORDER BY created_ms, id")
                        .c_str());
   select.Bind(1, character_id);
-  std::vector<BakeRecord> list;
-  while (true) {
-    const int rc = select.Step();
-    if (rc == SQLITE_DONE) return list;
-    if (rc != SQLITE_ROW) return SqlError(db_, "list bakes");
-    BakeRecord record = ReadBake(select);
+  return select.ReadAll("list bakes", [](const Statement& row) {
+    BakeRecord record = ReadBake(row);
     record.report_json.clear();  // lists stay small
-    list.push_back(std::move(record));
-  }
+    return record;
+  });
 }
 
 StatusOr<std::vector<LevelRecord>> Store::GetLevels(const std::string& bake_id) {
@@ -525,14 +512,10 @@ StatusOr<std::vector<LevelRecord>> Store::GetLevels(const std::string& bake_id) 
   Statement select(db_,
                    "SELECT idx, joints, hash, bytes FROM levels WHERE bake_id = ? ORDER BY idx");
   select.Bind(1, bake_id);
-  std::vector<LevelRecord> list;
-  while (true) {
-    const int rc = select.Step();
-    if (rc == SQLITE_DONE) return list;
-    if (rc != SQLITE_ROW) return SqlError(db_, "read levels");
-    list.push_back({static_cast<int>(select.Int(0)), static_cast<int>(select.Int(1)),
-                    select.Text(2), select.Int(3)});
-  }
+  return select.ReadAll("read levels", [](const Statement& row) {
+    return LevelRecord{static_cast<int>(row.Int(0)), static_cast<int>(row.Int(1)), row.Text(2),
+                       row.Int(3)};
+  });
 }
 
 StatusOr<std::vector<std::string>> Store::DeleteBake(const std::string& id) {
@@ -600,10 +583,7 @@ StatusOr<std::optional<JobRecord>> Store::GetJob(const std::string& id) {
   std::lock_guard lock(mutex_);
   Statement select(db_, Sql("SELECT ", kJobColumns, " FROM jobs WHERE id = ?").c_str());
   select.Bind(1, id);
-  const int rc = select.Step();
-  if (rc == SQLITE_ROW) return std::optional<JobRecord>(ReadJob(select));
-  if (rc == SQLITE_DONE) return std::optional<JobRecord>();
-  return SqlError(db_, "read job");
+  return select.ReadOne("read job", ReadJob);
 }
 
 StatusOr<bool> Store::UpdateJob(const JobRecord& job) {
@@ -632,13 +612,9 @@ StatusOr<std::vector<std::string>> Store::TakeUnfinishedJobs() {
       db_, "UPDATE jobs SET state = 'queued', progress = 0, stage = '' WHERE state = 'running'");
   if (Status status = reset.Run("requeue running jobs"); !status.ok()) return status;
   Statement select(db_, "SELECT id FROM jobs WHERE state = 'queued' ORDER BY seq");
-  std::vector<std::string> ids;
-  while (true) {
-    const int rc = select.Step();
-    if (rc == SQLITE_DONE) break;
-    if (rc != SQLITE_ROW) return SqlError(db_, "list unfinished jobs");
-    ids.push_back(select.Text(0));
-  }
+  auto ids =
+      select.ReadAll("list unfinished jobs", [](const Statement& row) { return row.Text(0); });
+  if (!ids.ok()) return ids.status();
   if (Status status = transaction.Commit(); !status.ok()) return status;
   return ids;
 }
@@ -648,22 +624,17 @@ StatusOr<std::map<std::string, int64_t>> Store::CountJobsByState() {
   Statement select(db_, "SELECT state, COUNT(*) FROM jobs GROUP BY state");
   std::map<std::string, int64_t> counts = {
       {"queued", 0}, {"running", 0}, {"succeeded", 0}, {"failed", 0}};
-  while (true) {
-    const int rc = select.Step();
-    if (rc == SQLITE_DONE) return counts;
-    if (rc != SQLITE_ROW) return SqlError(db_, "count jobs");
-    counts[select.Text(0)] = select.Int(1);
-  }
+  Status status = select.ForEachRow(
+      "count jobs", [&](const Statement& row) { counts[row.Text(0)] = row.Int(1); });
+  if (!status.ok()) return status;
+  return counts;
 }
 
 StatusOr<std::optional<int64_t>> Store::LevelBytes(const std::string& hash) {
   std::lock_guard lock(mutex_);
   Statement select(db_, "SELECT bytes FROM levels WHERE hash = ? LIMIT 1");
   select.Bind(1, hash);
-  const int rc = select.Step();
-  if (rc == SQLITE_ROW) return std::optional<int64_t>(select.Int(0));
-  if (rc == SQLITE_DONE) return std::optional<int64_t>();
-  return SqlError(db_, "read level");
+  return select.ReadOne("read level", [](const Statement& row) { return row.Int(0); });
 }
 
 StatusOr<bool> Store::IsBlobReferenced(const std::string& hash) {
@@ -686,21 +657,16 @@ StatusOr<std::vector<std::string>> Store::ReferencedBlobs() {
   {
     Statement select(
         db_, "SELECT hash FROM levels UNION SELECT level_set FROM bakes WHERE level_set != ''");
-    while (true) {
-      const int rc = select.Step();
-      if (rc == SQLITE_DONE) break;
-      if (rc != SQLITE_ROW) return SqlError(db_, "list level blobs");
-      blobs.insert(select.Text(0));
-    }
+    Status status = select.ForEachRow("list level blobs",
+                                      [&](const Statement& row) { blobs.insert(row.Text(0)); });
+    if (!status.ok()) return status;
   }
   for (const char* sql : {"SELECT files FROM characters", "SELECT files FROM motions"}) {
     Statement select(db_, sql);
-    while (true) {
-      const int rc = select.Step();
-      if (rc == SQLITE_DONE) break;
-      if (rc != SQLITE_ROW) return SqlError(db_, "list file blobs");
-      for (const FileRecord& f : FilesFromJson(select.Text(0))) blobs.insert(f.blob);
-    }
+    Status status = select.ForEachRow("list file blobs", [&](const Statement& row) {
+      for (const FileRecord& f : FilesFromJson(row.Text(0))) blobs.insert(f.blob);
+    });
+    if (!status.ok()) return status;
   }
   return std::vector<std::string>(blobs.begin(), blobs.end());
 }
