@@ -85,20 +85,52 @@ struct PreparedMotion::Impl {
   std::vector<Vec3d> sample_normals;  // |frames| x |vertices|: blended original normals
   double sample_area = 0;
 
-  // Every figure of LevelErrors.
-  void EvaluateErrors(const MatrixXd& delta, const std::vector<int>& kept, LevelErrors& out) const;
-  // Only the per-frame E and its parts, their means and maxima, and the RMS vertex error.
-  void QuadraticErrors(const MatrixXd& delta, const std::vector<int>& kept, LevelErrors& out) const;
-  void MaxVertexError(const MatrixXd& delta, LevelErrors& out) const;
-  void SampledErrors(const MatrixXd& delta, LevelErrors& out) const;
+  // Delta_k(t) = S_k(t) - K_k(t) for every original joint k, read from the matrices S it
+  // compares with the originals instead of materialised: a long motion's 4n x 3T
+  // difference does not fit the caches, and every figure would read it again.
+  struct DeltaView {
+    const MatrixXd* solution;       // rows of S, 3T columns (the solution, or kt itself)
+    std::vector<int> solution_row;  // first row of S_k in *solution
+    const MatrixXd* original;       // kt
+
+    // Whether Delta_k can be nonzero in some frame.
+    bool Moves(int k) const { return solution != original || solution_row[k] != 4 * k; }
+    Affine34d At(int k, int t) const {
+      return (solution->block<4, 3>(solution_row[k], 3 * t) - original->block<4, 3>(4 * k, 3 * t))
+          .transpose();
+    }
+    // Frame t's Delta_k^T stacked: 4n x 3, block (4k, 0) = Delta_k(t)^T.
+    void Frame(int t, Eigen::Matrix<double, Eigen::Dynamic, 3>& out) const;
+  };
+  // The per-frame bounds of the maximum search (see MaxVertexError).
+  struct MaxSearchBounds {
+    std::vector<Vec3d> column_norms;  // T x n: column norms of Delta_k(t)'s 3x3 part
+    std::vector<double> group_bound;  // T x n: bound of group j's vertices in frame t
+    std::vector<double> frame_bound;  // T
+    std::vector<double> joint_bound;  // scratch, n
+  };
+
+  enum class Figures {
+    kQuadratic,       // E and its parts per frame, their means and maxima, the RMS error
+    kMaxVertexError,  // the exact maximum vertex error and where it is
+    kAll,             // both and the sampled figures: every field of LevelErrors
+  };
+  // In one pass over the frames (the maximum search then revisits the frames it needs).
+  void EvaluateErrors(const DeltaView& delta, const std::vector<int>& kept, Figures figures,
+                      LevelErrors& out) const;
+  std::vector<size_t> ActivePairs(const DeltaView& delta) const;
+  void FrameQuadraticErrors(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame,
+                            const std::vector<size_t>& active_pairs, const std::vector<int>& kept,
+                            int t, LevelErrors& out) const;
+  void FrameBounds(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame, int t,
+                   MaxSearchBounds& bounds) const;
+  void MaxVertexError(const DeltaView& delta, const MaxSearchBounds& bounds, LevelErrors& out) const;
+  // Adds frame t = sample_frames[q]'s area-weighted distances and angles to the sums.
+  void FrameSampledErrors(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame, size_t q,
+                          double& distance_sum, double& angle_sum) const;
 };
 
 namespace {
-
-// Delta_k(t) as a 3x4 matrix from the stacked transposes.
-inline Affine34d DeltaAt(const MatrixXd& delta, int k, int t) {
-  return delta.block<4, 3>(4 * k, 3 * t).transpose();
-}
 
 std::vector<int> EvenlySpaced(int count, int available) {
   const int used = std::min(count, available);
@@ -191,11 +223,10 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
 
   // Normalisation: the largest error of the root-only, unoptimised skeleton.
   {
-    MatrixXd delta(4 * n, 3 * frames);
-    for (int k = 0; k < n; ++k) delta.middleRows(4 * k, 4) = d.kt.middleRows(0, 4) - d.kt.middleRows(4 * k, 4);
+    const Impl::DeltaView root_delta{&d.kt, std::vector<int>(n, 0), &d.kt};
     d.alpha = d.beta = 1.0;
     LevelErrors root_only;
-    d.QuadraticErrors(delta, {0}, root_only);
+    d.EvaluateErrors(root_delta, {0}, Impl::Figures::kQuadratic, root_only);
     double max_ep = 0, max_en = 0;
     for (int t = 0; t < frames; ++t) {
       max_ep = std::max(max_ep, root_only.ep_vertex[t] + root_only.ep_joint[t]);
@@ -244,7 +275,7 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
       Vec3d normal = Vec3d::Zero();
       for (uint32_t e = skin.influence_offsets[i]; e < skin.influence_offsets[i + 1]; ++e) {
         normal += skin.influence_weights[e] *
-                  (DeltaAt(d.kt, skin.influence_joints[e], t).leftCols<3>() *
+                  (d.kt.block<3, 3>(4 * skin.influence_joints[e], 3 * t).transpose() *
                    skin.normals[i].cast<double>());
       }
       d.sample_normals[q * d.sample_vertices.size() + v] = normal;
@@ -253,68 +284,152 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
   return std::shared_ptr<const PreparedMotion>(new PreparedMotion(std::move(impl)));
 }
 
-void PreparedMotion::Impl::EvaluateErrors(const MatrixXd& delta, const std::vector<int>& kept,
-                                          LevelErrors& out) const {
-  QuadraticErrors(delta, kept, out);
-  if (delta.isZero(0.0)) {
-    // The full skeleton (or a baseline that removes nothing): every figure is exactly 0.
-    out.max_vertex_error_pct = out.mean_vertex_error_pct = out.mean_normal_error_deg = 0;
-    out.max_vertex_frame = out.max_vertex_index = 0;
-    return;
+void PreparedMotion::Impl::DeltaView::Frame(int t, Eigen::Matrix<double, Eigen::Dynamic, 3>& out) const {
+  const int n = static_cast<int>(solution_row.size());
+  for (int k = 0; k < n; ++k) {
+    out.block<4, 3>(4 * k, 0) =
+        solution->block<4, 3>(solution_row[k], 3 * t) - original->block<4, 3>(4 * k, 3 * t);
   }
-  MaxVertexError(delta, out);
-  SampledErrors(delta, out);
 }
 
-void PreparedMotion::Impl::QuadraticErrors(const MatrixXd& delta, const std::vector<int>& kept,
-                                           LevelErrors& out) const {
-  out.e.assign(frames, 0.0);
-  out.ep_vertex.assign(frames, 0.0);
-  out.ep_joint.assign(frames, 0.0);
-  out.en_vertex.assign(frames, 0.0);
-  out.en_joint.assign(frames, 0.0);
-  const int rows = static_cast<int>(delta.rows());
-  // Pairs with a joint whose Delta is exactly zero in every frame add nothing (every
-  // kept joint of a baseline): skip them.
-  std::vector<size_t> active_pairs;
-  {
-    std::vector<char> moves(n);
-    for (int k = 0; k < n; ++k) moves[k] = !delta.middleRows(4 * k, 4).isZero(0.0);
-    for (size_t q = 0; q < pairs.size(); ++q) {
-      if (moves[pairs[q].first] && moves[pairs[q].second]) active_pairs.push_back(q);
-    }
+std::vector<size_t> PreparedMotion::Impl::ActivePairs(const DeltaView& delta) const {
+  // Pairs with a joint whose Delta is zero in every frame add nothing (every kept joint of
+  // a baseline): skip them.
+  std::vector<size_t> active;
+  for (size_t q = 0; q < pairs.size(); ++q) {
+    if (delta.Moves(pairs[q].first) && delta.Moves(pairs[q].second)) active.push_back(q);
   }
+  return active;
+}
+
+void PreparedMotion::Impl::EvaluateErrors(const DeltaView& delta, const std::vector<int>& kept,
+                                          Figures figures, LevelErrors& out) const {
+  const bool quadratic = figures != Figures::kMaxVertexError;
+  const bool maximum = figures != Figures::kQuadratic;
+  const bool sampled = figures == Figures::kAll;
+  bool moves = false;
+  for (int k = 0; k < n && !moves; ++k) moves = delta.Moves(k);
+  if (quadratic) {
+    out.e.assign(frames, 0.0);
+    out.ep_vertex.assign(frames, 0.0);
+    out.ep_joint.assign(frames, 0.0);
+    out.en_vertex.assign(frames, 0.0);
+    out.en_joint.assign(frames, 0.0);
+  }
+  // The full skeleton (or a baseline that removes nothing): every figure is exactly 0.
+  if (!moves) return;
+
+  const std::vector<size_t> active_pairs = quadratic ? ActivePairs(delta) : std::vector<size_t>{};
+  MaxSearchBounds bounds;
+  if (maximum) {
+    bounds.column_norms.resize(static_cast<size_t>(frames) * n);
+    bounds.group_bound.assign(static_cast<size_t>(frames) * n, 0.0);
+    bounds.frame_bound.assign(frames, 0.0);
+    bounds.joint_bound.resize(n);
+  }
+  double distance_sum = 0, angle_sum = 0;
+  size_t next_sample = 0;
+  Eigen::Matrix<double, Eigen::Dynamic, 3> frame(4 * n, 3);
   for (int t = 0; t < frames; ++t) {
-    // sum_kl tr(Delta_k^T C_kl Delta_l) over the pairs; frame t's 4n x 3 block is contiguous.
-    const Eigen::Map<const Eigen::MatrixXd, 0, Eigen::OuterStride<>> frame(
-        delta.data() + static_cast<size_t>(3) * t * rows, rows, 3, Eigen::OuterStride<>(rows));
-    double ep = 0, en = 0;
-    for (size_t q : active_pairs) {
-      const auto [k, l] = pairs[q];
-      const Eigen::Matrix<double, 4, 3> dk = frame.block<4, 3>(4 * k, 0);
-      const Eigen::Matrix<double, 4, 3> dl = frame.block<4, 3>(4 * l, 0);
-      ep += dk.cwiseProduct(pair_cp[q] * dl).sum();
-      en += dk.topRows<3>().cwiseProduct(pair_cn[q] * dl.topRows<3>()).sum();
+    delta.Frame(t, frame);
+    if (quadratic) FrameQuadraticErrors(frame, active_pairs, kept, t, out);
+    if (maximum) FrameBounds(frame, t, bounds);
+    if (sampled && next_sample < sample_frames.size() && sample_frames[next_sample] == t) {
+      FrameSampledErrors(frame, next_sample++, distance_sum, angle_sum);
     }
-    out.ep_vertex[t] = std::max(0.0, ep);
-    out.en_vertex[t] = std::max(0.0, en);
-    for (int j : kept) {
-      const Eigen::Matrix<double, 4, 3> block = delta.block<4, 3>(4 * j, 3 * t);
-      out.ep_joint[t] += joint_weight[j] * (block.transpose() * joint_point[j]).squaredNorm();
-      out.en_joint[t] += joint_weight[j] * (block.transpose() * joint_axis[j]).squaredNorm();
-    }
-    out.e[t] = alpha * (out.ep_vertex[t] + out.ep_joint[t]) +
-               beta * (out.en_vertex[t] + out.en_joint[t]);
   }
-  out.mean_e = std::accumulate(out.e.begin(), out.e.end(), 0.0) / frames;
-  const auto max_it = std::max_element(out.e.begin(), out.e.end());
-  out.max_e = *max_it;
-  out.max_e_frame = static_cast<int>(max_it - out.e.begin());
-  const double mean_sq = std::accumulate(out.ep_vertex.begin(), out.ep_vertex.end(), 0.0) / frames;
-  out.rms_vertex_error_pct = 100.0 * std::sqrt(mean_sq) / character->height();
+  if (quadratic) {
+    out.mean_e = std::accumulate(out.e.begin(), out.e.end(), 0.0) / frames;
+    const auto max_it = std::max_element(out.e.begin(), out.e.end());
+    out.max_e = *max_it;
+    out.max_e_frame = static_cast<int>(max_it - out.e.begin());
+    const double mean_sq = std::accumulate(out.ep_vertex.begin(), out.ep_vertex.end(), 0.0) / frames;
+    out.rms_vertex_error_pct = 100.0 * std::sqrt(mean_sq) / character->height();
+  }
+  if (maximum) MaxVertexError(delta, bounds, out);
+  if (sampled) {
+    const double weight = sample_area * static_cast<double>(sample_frames.size());
+    out.mean_vertex_error_pct = 100.0 * distance_sum / weight / character->height();
+    out.mean_normal_error_deg = angle_sum / weight * 180.0 / M_PI;
+  }
 }
 
-void PreparedMotion::Impl::MaxVertexError(const MatrixXd& delta, LevelErrors& out) const {
+void PreparedMotion::Impl::FrameQuadraticErrors(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame,
+                                                const std::vector<size_t>& active_pairs,
+                                                const std::vector<int>& kept, int t,
+                                                LevelErrors& out) const {
+  // sum_kl tr(Delta_k^T C_kl Delta_l) over the pairs.
+  double ep = 0, en = 0;
+  for (size_t q : active_pairs) {
+    const auto [k, l] = pairs[q];
+    const Eigen::Matrix<double, 4, 3> dk = frame.block<4, 3>(4 * k, 0);
+    const Eigen::Matrix<double, 4, 3> dl = frame.block<4, 3>(4 * l, 0);
+    ep += dk.cwiseProduct(pair_cp[q] * dl).sum();
+    en += dk.topRows<3>().cwiseProduct(pair_cn[q] * dl.topRows<3>()).sum();
+  }
+  out.ep_vertex[t] = std::max(0.0, ep);
+  out.en_vertex[t] = std::max(0.0, en);
+  for (int j : kept) {
+    const Eigen::Matrix<double, 4, 3> block = frame.block<4, 3>(4 * j, 0);
+    out.ep_joint[t] += joint_weight[j] * (block.transpose() * joint_point[j]).squaredNorm();
+    out.en_joint[t] += joint_weight[j] * (block.transpose() * joint_axis[j]).squaredNorm();
+  }
+  out.e[t] = alpha * (out.ep_vertex[t] + out.ep_joint[t]) + beta * (out.en_vertex[t] + out.en_joint[t]);
+}
+
+namespace {
+
+// Bounds of the maximum search (see MaxVertexError). U_g for a box with center c and half
+// extents h, from the column norms of Delta_g's 3x3 part.
+inline double BoxBound(const Affine34d& dk, const Vec3d& column_norms, const Vec3d& center,
+                       const Vec3d& half) {
+  return TransformPoint(dk, center).norm() + column_norms.dot(half);
+}
+
+// min(max_g U_g, sum_g W_g U_g) over a list of influences, U_g = bound_of(g).
+template <typename BoundOf>
+double WeightedBound(const Character::MaxInfluence* begin, const Character::MaxInfluence* end,
+                     BoundOf&& bound_of) {
+  // Weights sum to 1 within the validation's tolerance.
+  constexpr double kWeightSum = 1.0 + 1e-3;
+  double largest = 0, weighted = 0;
+  for (const Character::MaxInfluence* q = begin; q != end; ++q) {
+    const double u = bound_of(q->joint);
+    largest = std::max(largest, u);
+    weighted += q->weight * u;
+  }
+  return std::min(kWeightSum * largest, weighted);
+}
+
+}  // namespace
+
+void PreparedMotion::Impl::FrameBounds(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame, int t,
+                                       MaxSearchBounds& bounds) const {
+  // Coarse bounds for every group from the joints' own boxes (one box bound per joint); a
+  // visited group is refined with its own box.
+  const Character& c = *character;
+  const auto& group_clusters = c.group_cluster_offsets();
+  const auto& group_influence_offsets = c.group_influence_offsets();
+  const auto& group_influences = c.group_influences();
+  Vec3d* norms = bounds.column_norms.data() + static_cast<size_t>(t) * n;
+  for (int k = 0; k < n; ++k) {
+    const Affine34d dk = frame.block<4, 3>(4 * k, 0).transpose();
+    norms[k] = dk.leftCols<3>().colwise().norm().transpose();
+    bounds.joint_bound[k] =
+        BoxBound(dk, norms[k], c.joint_vertex_centers()[k], c.joint_vertex_half_extents()[k]);
+  }
+  for (int j = 0; j < n; ++j) {
+    if (group_clusters[j] == group_clusters[j + 1]) continue;
+    const double u = WeightedBound(group_influences.data() + group_influence_offsets[j],
+                                   group_influences.data() + group_influence_offsets[j + 1],
+                                   [&](int g) { return bounds.joint_bound[g]; });
+    bounds.group_bound[static_cast<size_t>(t) * n + j] = u;
+    bounds.frame_bound[t] = std::max(bounds.frame_bound[t], u);
+  }
+}
+
+void PreparedMotion::Impl::MaxVertexError(const DeltaView& delta, const MaxSearchBounds& bounds,
+                                          LevelErrors& out) const {
   // Exact maximum of |d_i(t)|, d_i(t) = sum_g w_ig Delta_g(t) [v0_i; 1], over all vertices
   // and frames without evaluating most of them. For a box with center c and half extents
   // h in the bind pose, every vertex v in it has
@@ -323,15 +438,14 @@ void PreparedMotion::Impl::MaxVertexError(const MatrixXd& delta, LevelErrors& ou
   //   |d_i| <= min(max_g U_g, sum_g W_g U_g)
   // (the first because i's weights sum to 1, the second by the triangle inequality; the
   // second stays tight for vertices lightly weighted to a joint that moved a lot).
-  // Bounds nest: per frame and vertex group (dominant joint) from the joints' boxes, then
-  // from the group's box, then per cluster; frames and groups are visited by decreasing
-  // bound and only clusters whose bound beats the best exact value so far are evaluated.
+  // Bounds nest: per frame and vertex group (dominant joint) from the joints' boxes
+  // (FrameBounds), then from the group's box, then per cluster; frames and groups are
+  // visited by decreasing bound and only clusters whose bound beats the best exact value
+  // so far are evaluated.
   // Bounds below kNegligible of the height are not refined: a level that close to exact
   // reports its maximum to within 1e-5 % of the height (0.001 px on a 10000 px tall
   // character).
   constexpr double kNegligible = 1e-7;
-  // Weights sum to 1 within the validation's tolerance.
-  constexpr double kWeightSum = 1.0 + 1e-3;
   const Character& c = *character;
   const RawSkin& skin = c.skin();
   const auto& group_clusters = c.group_cluster_offsets();
@@ -341,86 +455,46 @@ void PreparedMotion::Impl::MaxVertexError(const MatrixXd& delta, LevelErrors& ou
   const auto& cluster_vertices = c.cluster_vertices();
   const auto& cluster_influence_offsets = c.cluster_influence_offsets();
   const auto& cluster_influences = c.cluster_influences();
-  // U_g for a box with center c and half extents h, from the column norms of Delta_g's
-  // 3x3 part (computed once per frame and joint).
-  auto box_bound = [](const Affine34d& dk, const Vec3d& column_norms, const Vec3d& center,
-                      const Vec3d& half) {
-    return TransformPoint(dk, center).norm() + column_norms.dot(half);
-  };
-  // min(max_g U_g, sum_g W_g U_g) over a list of influences, U_g = bound_of(g).
-  auto weighted_bound = [&](const Character::MaxInfluence* begin, const Character::MaxInfluence* end,
-                            auto&& bound_of) {
-    double largest = 0, weighted = 0;
-    for (const Character::MaxInfluence* q = begin; q != end; ++q) {
-      const double u = bound_of(q->joint);
-      largest = std::max(largest, u);
-      weighted += q->weight * u;
-    }
-    return std::min(kWeightSum * largest, weighted);
-  };
 
-  // Coarse bounds for every frame and group from the joints' own boxes (one box bound
-  // per frame and joint); a visited group is refined with its own box.
-  std::vector<Affine34d> frame_delta(n);
-  std::vector<Vec3d> column_norms(static_cast<size_t>(frames) * n);
-  std::vector<double> joint_bound(n);
-  std::vector<double> group_bound(static_cast<size_t>(frames) * n, 0.0);
-  std::vector<double> frame_bound(frames, 0.0);
-  for (int t = 0; t < frames; ++t) {
-    Vec3d* norms = column_norms.data() + static_cast<size_t>(t) * n;
-    for (int k = 0; k < n; ++k) {
-      const Affine34d dk = DeltaAt(delta, k, t);
-      norms[k] = dk.leftCols<3>().colwise().norm().transpose();
-      joint_bound[k] = box_bound(dk, norms[k], c.joint_vertex_centers()[k],
-                                 c.joint_vertex_half_extents()[k]);
-    }
-    for (int j = 0; j < n; ++j) {
-      if (group_clusters[j] == group_clusters[j + 1]) continue;
-      const double u = weighted_bound(group_influences.data() + group_influence_offsets[j],
-                                      group_influences.data() + group_influence_offsets[j + 1],
-                                      [&](int g) { return joint_bound[g]; });
-      group_bound[static_cast<size_t>(t) * n + j] = u;
-      frame_bound[t] = std::max(frame_bound[t], u);
-    }
-  }
   std::vector<int> frame_order(frames);
   std::iota(frame_order.begin(), frame_order.end(), 0);
   std::sort(frame_order.begin(), frame_order.end(),
-            [&](int a, int b) { return frame_bound[a] > frame_bound[b]; });
+            [&](int a, int b) { return bounds.frame_bound[a] > bounds.frame_bound[b]; });
 
   double best = 0;
   int best_frame = 0, best_vertex = 0;
   const double negligible = kNegligible * c.height();
   // The exact evaluations blend in float (the skin's own precision): twice the throughput,
   // and the figure is a display quantity.
+  std::vector<Affine34d> frame_delta(n);
   std::vector<Affine34f> frame_delta_f(n);
   std::vector<int> group_order(n);
   for (int t : frame_order) {
-    if (frame_bound[t] <= std::max(best, negligible)) break;
+    if (bounds.frame_bound[t] <= std::max(best, negligible)) break;
     for (int k = 0; k < n; ++k) {
-      frame_delta[k] = DeltaAt(delta, k, t);
+      frame_delta[k] = delta.At(k, t);
       frame_delta_f[k] = frame_delta[k].cast<float>();
     }
-    const double* bound = group_bound.data() + static_cast<size_t>(t) * n;
-    const Vec3d* norms = column_norms.data() + static_cast<size_t>(t) * n;
+    const double* bound = bounds.group_bound.data() + static_cast<size_t>(t) * n;
+    const Vec3d* norms = bounds.column_norms.data() + static_cast<size_t>(t) * n;
     std::iota(group_order.begin(), group_order.end(), 0);
     std::sort(group_order.begin(), group_order.end(), [&](int a, int b) { return bound[a] > bound[b]; });
     for (int j : group_order) {
       if (bound[j] <= std::max(best, negligible)) break;
       const Vec3d& group_center = c.group_centers()[j];
       const Vec3d& group_half = c.group_half_extents()[j];
-      const double refined = weighted_bound(
+      const double refined = WeightedBound(
           group_influences.data() + group_influence_offsets[j],
           group_influences.data() + group_influence_offsets[j + 1],
-          [&](int g) { return box_bound(frame_delta[g], norms[g], group_center, group_half); });
+          [&](int g) { return BoxBound(frame_delta[g], norms[g], group_center, group_half); });
       if (refined <= std::max(best, negligible)) continue;
       for (uint32_t cluster = group_clusters[j]; cluster < group_clusters[j + 1]; ++cluster) {
         const Vec3d& center = c.cluster_centers()[cluster];
         const Vec3d& half = c.cluster_half_extents()[cluster];
-        const double cluster_bound = weighted_bound(
+        const double cluster_bound = WeightedBound(
             cluster_influences.data() + cluster_influence_offsets[cluster],
             cluster_influences.data() + cluster_influence_offsets[cluster + 1],
-            [&](int g) { return box_bound(frame_delta[g], norms[g], center, half); });
+            [&](int g) { return BoxBound(frame_delta[g], norms[g], center, half); });
         if (cluster_bound <= std::max(best, negligible)) continue;
         for (uint32_t e = cluster_vertex_offsets[cluster]; e < cluster_vertex_offsets[cluster + 1]; ++e) {
           const uint32_t i = cluster_vertices[e];
@@ -443,35 +517,30 @@ void PreparedMotion::Impl::MaxVertexError(const MatrixXd& delta, LevelErrors& ou
   out.max_vertex_index = best_vertex;
 }
 
-void PreparedMotion::Impl::SampledErrors(const MatrixXd& delta, LevelErrors& out) const {
+void PreparedMotion::Impl::FrameSampledErrors(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame,
+                                              size_t q, double& distance_sum,
+                                              double& angle_sum) const {
   const RawSkin& skin = character->skin();
   const std::vector<double>& areas = character->vertex_areas();
-  double distance_sum = 0, angle_sum = 0;
   // Blends in float, as the maximum search: the rounding is relative to Delta itself.
   std::vector<Affine34f> frame_delta(n);
-  for (size_t q = 0; q < sample_frames.size(); ++q) {
-    const int t = sample_frames[q];
-    for (int k = 0; k < n; ++k) frame_delta[k] = DeltaAt(delta, k, t).cast<float>();
-    for (size_t v = 0; v < sample_vertices.size(); ++v) {
-      const int i = sample_vertices[v];
-      Affine34f blended = Affine34f::Zero();
-      for (uint32_t g = skin.influence_offsets[i]; g < skin.influence_offsets[i + 1]; ++g) {
-        blended.noalias() += skin.influence_weights[g] * frame_delta[skin.influence_joints[g]];
-      }
-      const Vec3d d = TransformPoint(blended, skin.positions[i]).cast<double>();
-      const Vec3d dn = TransformDirection(blended, skin.normals[i]).cast<double>();
-      const Vec3d& normal = sample_normals[q * sample_vertices.size() + v];
-      const Vec3d reduced = normal + dn;
-      distance_sum += areas[i] * d.norm();
-      // The angle from its cosine: one acos instead of atan2 and a cross product.
-      const double norms = std::sqrt(normal.squaredNorm() * reduced.squaredNorm());
-      const double cosine = norms > 0 ? std::clamp(normal.dot(reduced) / norms, -1.0, 1.0) : 1.0;
-      angle_sum += areas[i] * std::acos(cosine);
+  for (int k = 0; k < n; ++k) frame_delta[k] = frame.block<4, 3>(4 * k, 0).transpose().cast<float>();
+  for (size_t v = 0; v < sample_vertices.size(); ++v) {
+    const int i = sample_vertices[v];
+    Affine34f blended = Affine34f::Zero();
+    for (uint32_t g = skin.influence_offsets[i]; g < skin.influence_offsets[i + 1]; ++g) {
+      blended.noalias() += skin.influence_weights[g] * frame_delta[skin.influence_joints[g]];
     }
+    const Vec3d d = TransformPoint(blended, skin.positions[i]).cast<double>();
+    const Vec3d dn = TransformDirection(blended, skin.normals[i]).cast<double>();
+    const Vec3d& normal = sample_normals[q * sample_vertices.size() + v];
+    const Vec3d reduced = normal + dn;
+    distance_sum += areas[i] * d.norm();
+    // The angle from its cosine: one acos instead of atan2 and a cross product.
+    const double norms = std::sqrt(normal.squaredNorm() * reduced.squaredNorm());
+    const double cosine = norms > 0 ? std::clamp(normal.dot(reduced) / norms, -1.0, 1.0) : 1.0;
+    angle_sum += areas[i] * std::acos(cosine);
   }
-  const double weight = sample_area * static_cast<double>(sample_frames.size());
-  out.mean_vertex_error_pct = 100.0 * distance_sum / weight / character->height();
-  out.mean_normal_error_deg = angle_sum / weight * 180.0 / M_PI;
 }
 
 namespace {
@@ -505,17 +574,23 @@ Status SolveSpdTransposed(const SparseMatrixd& a, MatrixXd& xt) {
       if (it.row() == j) diagonal[j] = it.value();
     }
   }
-  for (int j = 0; j < dim; ++j) {  // L z = y
-    yt.col(j) /= diagonal[j];
-    for (SparseMatrixd::InnerIterator it(l, j); it; ++it) {
-      if (it.row() > j) yt.col(it.row()) -= it.value() * yt.col(j);
+  // Right-hand sides in row blocks whose columns stay in the L1 cache: a long motion's
+  // whole columns (3T doubles each) would stream every factor entry's update from L3.
+  constexpr Eigen::Index kBlockRows = 512;
+  for (Eigen::Index first = 0; first < yt.rows(); first += kBlockRows) {
+    auto block = yt.middleRows(first, std::min(kBlockRows, yt.rows() - first));
+    for (int j = 0; j < dim; ++j) {  // L z = y
+      block.col(j) /= diagonal[j];
+      for (SparseMatrixd::InnerIterator it(l, j); it; ++it) {
+        if (it.row() > j) block.col(it.row()) -= it.value() * block.col(j);
+      }
     }
-  }
-  for (int j = dim - 1; j >= 0; --j) {  // L^T w = z
-    for (SparseMatrixd::InnerIterator it(l, j); it; ++it) {
-      if (it.row() > j) yt.col(j) -= it.value() * yt.col(it.row());
+    for (int j = dim - 1; j >= 0; --j) {  // L^T w = z
+      for (SparseMatrixd::InnerIterator it(l, j); it; ++it) {
+        if (it.row() > j) block.col(j) -= it.value() * block.col(it.row());
+      }
+      block.col(j) /= diagonal[j];
     }
-    yt.col(j) /= diagonal[j];
   }
   // x = P^-1 w: row i of x is row indices(i) of w.
   for (int i = 0; i < dim; ++i) xt.col(i) = yt.col(permutation[i]);
@@ -627,7 +702,10 @@ StatusOr<LevelResult> PreparedMotion::SolveLevel(const ReducedSkeleton& level, D
   // With every joint kept, original matrices that are rotations already (to within
   // rounding) are the constrained minimiser too (no residual): keep them bit for bit, as
   // the fitted variants do, instead of projecting and re-solving them.
-  if (IsRigid(d.settings.variant) && !(m == n && AllRotations(x))) {
+  const bool projected = IsRigid(d.settings.variant) && !(m == n && AllRotations(x));
+  // The full level's solution is the original matrices themselves (SolveSystem).
+  const bool unchanged = m == n && !projected;
+  if (projected) {
     for (int t = 0; t < d.frames; ++t) {
       for (int s = 0; s < m; ++s) {
         const Eigen::Matrix3d a = x.block<3, 3>(4 * s, 3 * t).transpose();
@@ -673,20 +751,19 @@ StatusOr<LevelResult> PreparedMotion::SolveLevel(const ReducedSkeleton& level, D
     }
   }
 
-  MatrixXd delta(4 * n, cols);
-  for (int k = 0; k < n; ++k) {
-    delta.middleRows(4 * k, 4) = x.middleRows(4 * phi[k], 4) - d.kt.middleRows(4 * k, 4);
-  }
+  // Delta_k = K'_phi(k) - K_k, or nothing at all where the solution is the original.
+  Impl::DeltaView optimized{&x, std::vector<int>(n), &d.kt};
+  for (int k = 0; k < n; ++k) optimized.solution_row[k] = unchanged ? 4 * k : 4 * phi[k];
+  if (unchanged) optimized.solution = &d.kt;
   if (detail == Detail::kMaxVertexError) {
-    d.MaxVertexError(delta, result.optimized);
+    d.EvaluateErrors(optimized, level.kept_joints, Impl::Figures::kMaxVertexError, result.optimized);
     return result;
   }
-  d.EvaluateErrors(delta, level.kept_joints, result.optimized);
-  for (int k = 0; k < n; ++k) {
-    delta.middleRows(4 * k, 4) =
-        d.kt.middleRows(4 * level.kept_joints[phi[k]], 4) - d.kt.middleRows(4 * k, 4);
-  }
-  d.EvaluateErrors(delta, level.kept_joints, result.baseline);
+  d.EvaluateErrors(optimized, level.kept_joints, Impl::Figures::kAll, result.optimized);
+  // The baseline: Delta_k = K_kept(phi(k)) - K_k.
+  Impl::DeltaView baseline{&d.kt, std::vector<int>(n), &d.kt};
+  for (int k = 0; k < n; ++k) baseline.solution_row[k] = 4 * level.kept_joints[phi[k]];
+  d.EvaluateErrors(baseline, level.kept_joints, Impl::Figures::kAll, result.baseline);
   return result;
 }
 
