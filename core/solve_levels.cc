@@ -125,9 +125,11 @@ struct PreparedMotion::Impl {
   void FrameBounds(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame, int t,
                    MaxSearchBounds& bounds) const;
   void MaxVertexError(const DeltaView& delta, const MaxSearchBounds& bounds, LevelErrors& out) const;
-  // Adds frame t = sample_frames[q]'s area-weighted distances and angles to the sums.
+  // Adds frame t = sample_frames[q]'s area-weighted distances and angles to the sums;
+  // frame_delta is scratch for n matrices.
   void FrameSampledErrors(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame, size_t q,
-                          double& distance_sum, double& angle_sum) const;
+                          std::vector<Affine34f>& frame_delta, double& distance_sum,
+                          double& angle_sum) const;
 };
 
 namespace {
@@ -329,13 +331,14 @@ void PreparedMotion::Impl::EvaluateErrors(const DeltaView& delta, const std::vec
   }
   double distance_sum = 0, angle_sum = 0;
   size_t next_sample = 0;
+  std::vector<Affine34f> sample_delta(sampled ? n : 0);
   Eigen::Matrix<double, Eigen::Dynamic, 3> frame(4 * n, 3);
   for (int t = 0; t < frames; ++t) {
     delta.Frame(t, frame);
     if (quadratic) FrameQuadraticErrors(frame, active_pairs, kept, t, out);
     if (maximum) FrameBounds(frame, t, bounds);
     if (sampled && next_sample < sample_frames.size() && sample_frames[next_sample] == t) {
-      FrameSampledErrors(frame, next_sample++, distance_sum, angle_sum);
+      FrameSampledErrors(frame, next_sample++, sample_delta, distance_sum, angle_sum);
     }
   }
   if (quadratic) {
@@ -518,12 +521,11 @@ void PreparedMotion::Impl::MaxVertexError(const DeltaView& delta, const MaxSearc
 }
 
 void PreparedMotion::Impl::FrameSampledErrors(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame,
-                                              size_t q, double& distance_sum,
-                                              double& angle_sum) const {
+                                              size_t q, std::vector<Affine34f>& frame_delta,
+                                              double& distance_sum, double& angle_sum) const {
   const RawSkin& skin = character->skin();
   const std::vector<double>& areas = character->vertex_areas();
   // Blends in float, as the maximum search: the rounding is relative to Delta itself.
-  std::vector<Affine34f> frame_delta(n);
   for (int k = 0; k < n; ++k) frame_delta[k] = frame.block<4, 3>(4 * k, 0).transpose().cast<float>();
   for (size_t v = 0; v < sample_vertices.size(); ++v) {
     const int i = sample_vertices[v];
@@ -718,9 +720,13 @@ StatusOr<LevelResult> PreparedMotion::SolveLevel(const ReducedSkeleton& level, D
       // G_TT and G_TN keep G's block sparsity: G_TT is factored sparse, and each nonzero
       // of G_TN subtracts one contiguous column of all frames (as for F in Create: a
       // sparse-dense product updates one coefficient at a time).
+      // Transposed copies are made column by column of x: reading a row of x would touch
+      // one cache line per column, every line of a long motion's x for each row.
       MatrixXd x_nt(cols, 3 * m);
-      for (int s = 0; s < m; ++s) {
-        for (int r = 0; r < 3; ++r) x_nt.col(3 * s + r) = x.row(4 * s + r).transpose();
+      for (int col = 0; col < cols; ++col) {
+        for (int s = 0; s < m; ++s) {
+          for (int r = 0; r < 3; ++r) x_nt(col, 3 * s + r) = x(4 * s + r, col);
+        }
       }
       std::vector<Eigen::Triplet<double>> tt;
       MatrixXd x_tt(cols, m);
@@ -737,7 +743,9 @@ StatusOr<LevelResult> PreparedMotion::SolveLevel(const ReducedSkeleton& level, D
       SparseMatrixd g_tt(m, m);
       g_tt.setFromTriplets(tt.begin(), tt.end());
       if (Status status = SolveSpdTransposed(g_tt, x_tt); !status.ok()) return status;
-      for (int s = 0; s < m; ++s) x.row(4 * s + 3) = x_tt.col(s).transpose();
+      for (int col = 0; col < cols; ++col) {
+        for (int s = 0; s < m; ++s) x(4 * s + 3, col) = x_tt(col, s);
+      }
     }
   }
 
