@@ -71,7 +71,7 @@ struct PreparedMotion::Impl {
   std::vector<Eigen::Matrix4d> pair_cp;
   std::vector<Eigen::Matrix3d> pair_cn;
   SparseMatrixd q_fit;            // alpha Cp + beta_fit Cn
-  // The right-hand sides are assembled transposed (3T x 4m, see SolveSpdTransposed)
+  // The right-hand sides are assembled transposed (3T x 4m, see SolveSpd)
   // from transposed copies: ft = (q_fit * kt)^T and ktt = kt^T, both 3T x 4n.
   MatrixXd ft, ktt;
   std::vector<Eigen::Vector4d> joint_point;      // [p0_j; 1]
@@ -554,20 +554,22 @@ struct LevelSystem {
 };
 
 // Solves A X = B for a sparse symmetric positive definite A (dim x dim) and many
-// right-hand sides, given and returned transposed: xt = B^T on entry (cols x dim), X^T on
-// return. Eigen's SimplicialLLT::solve walks the factor once per right-hand side with
-// scalar updates; here each entry of the factor updates a whole column of xt at once
-// (contiguous, vectorised), the same arithmetic in another order.
-Status SolveSpdTransposed(const SparseMatrixd& a, MatrixXd& xt) {
+// right-hand sides given transposed, bt = B^T (cols x dim); returns X (dim x cols).
+// Eigen's SimplicialLLT::solve walks the factor once per right-hand side with scalar
+// updates; here each entry of the factor updates a whole column of a block of B^T's rows
+// at once (contiguous, vectorised), the same arithmetic in another order. The blocks'
+// columns stay in the L1 cache (a long motion's whole columns, 3T doubles each, would
+// stream every update from L3), and each block goes from B^T to X in one pass.
+StatusOr<MatrixXd> SolveSpd(const SparseMatrixd& a, const MatrixXd& bt) {
   const Eigen::SimplicialLLT<SparseMatrixd, Eigen::Lower, Eigen::AMDOrdering<int>> llt(a);
   if (llt.info() != Eigen::Success) {
     return Status(StatusCode::kInternal, "SolveLevel: a normal matrix is not positive definite");
   }
   const int dim = static_cast<int>(a.rows());
-  // y = P b: row i of b goes to row indices(i) of y.
+  const Eigen::Index cols = bt.rows();
+  // y = P b: row i of b goes to row indices(i) of y; x = P^-1 w: row i of x is row
+  // indices(i) of w.
   const auto& permutation = llt.permutationP().indices();
-  MatrixXd yt(xt.rows(), dim);
-  for (int i = 0; i < dim; ++i) yt.col(permutation[i]) = xt.col(i);
   // L is stored column-major in the lower triangle with its diagonal.
   const SparseMatrixd& l = llt.matrixL().nestedExpression();
   std::vector<double> diagonal(dim);
@@ -576,11 +578,13 @@ Status SolveSpdTransposed(const SparseMatrixd& a, MatrixXd& xt) {
       if (it.row() == j) diagonal[j] = it.value();
     }
   }
-  // Right-hand sides in row blocks whose columns stay in the L1 cache: a long motion's
-  // whole columns (3T doubles each) would stream every factor entry's update from L3.
   constexpr Eigen::Index kBlockRows = 512;
-  for (Eigen::Index first = 0; first < yt.rows(); first += kBlockRows) {
-    auto block = yt.middleRows(first, std::min(kBlockRows, yt.rows() - first));
+  MatrixXd x(dim, cols);
+  MatrixXd yt(std::min(kBlockRows, cols), dim);
+  for (Eigen::Index first = 0; first < cols; first += kBlockRows) {
+    const Eigen::Index rows = std::min(kBlockRows, cols - first);
+    auto block = yt.topRows(rows);
+    for (int i = 0; i < dim; ++i) block.col(permutation[i]) = bt.col(i).segment(first, rows);
     for (int j = 0; j < dim; ++j) {  // L z = y
       block.col(j) /= diagonal[j];
       for (SparseMatrixd::InnerIterator it(l, j); it; ++it) {
@@ -593,10 +597,12 @@ Status SolveSpdTransposed(const SparseMatrixd& a, MatrixXd& xt) {
       }
       block.col(j) /= diagonal[j];
     }
+    for (Eigen::Index r = 0; r < rows; ++r) {
+      double* column = x.col(first + r).data();
+      for (int i = 0; i < dim; ++i) column[i] = block(r, permutation[i]);
+    }
   }
-  // x = P^-1 w: row i of x is row indices(i) of w.
-  for (int i = 0; i < dim; ++i) xt.col(i) = yt.col(permutation[i]);
-  return Status::Ok();
+  return x;
 }
 
 Status ValidateLevel(const ReducedSkeleton& level, int n) {
@@ -675,9 +681,9 @@ StatusOr<LevelSystem> SolveSystem(const PreparedMotion::Impl& d, const ReducedSk
   // G is block-sparse (kept joints that share vertices) and nearly a tree: a sparse
   // Cholesky with a fill-reducing ordering solves the 3T right-hand sides in time nearly
   // linear in m instead of quadratic.
-  MatrixXd xt = bt;
-  if (Status status = SolveSpdTransposed(g.sparseView(), xt); !status.ok()) return status;
-  system.x = xt.transpose();
+  auto x = SolveSpd(g.sparseView(), bt);
+  if (!x.ok()) return x.status();
+  system.x = *std::move(x);
   return system;
 }
 
@@ -716,7 +722,7 @@ StatusOr<LevelResult> PreparedMotion::SolveLevel(const ReducedSkeleton& level, D
     }
     if (d.settings.resolve_rigid_translation) {
       // x_T = G_TT^-1 (b_T - G_TN x_N): translations are rows 4s+3, the rest is fixed.
-      // Transposed, as SolveSpdTransposed takes it: x_T^T = (b_T^T - x_N^T G_TN^T) G_TT^-1.
+      // The right-hand sides transposed, as SolveSpd takes them: b_T^T - x_N^T G_TN^T.
       // G_TT and G_TN keep G's block sparsity: G_TT is factored sparse, and each nonzero
       // of G_TN subtracts one contiguous column of all frames (as for F in Create: a
       // sparse-dense product updates one coefficient at a time).
@@ -742,9 +748,10 @@ StatusOr<LevelResult> PreparedMotion::SolveLevel(const ReducedSkeleton& level, D
       }
       SparseMatrixd g_tt(m, m);
       g_tt.setFromTriplets(tt.begin(), tt.end());
-      if (Status status = SolveSpdTransposed(g_tt, x_tt); !status.ok()) return status;
+      auto translations = SolveSpd(g_tt, x_tt);
+      if (!translations.ok()) return translations.status();
       for (int col = 0; col < cols; ++col) {
-        for (int s = 0; s < m; ++s) x(4 * s + 3, col) = x_tt(col, s);
+        for (int s = 0; s < m; ++s) x(4 * s + 3, col) = (*translations)(s, col);
       }
     }
   }
