@@ -235,6 +235,44 @@ TEST_F(RealData, TheReportTimesASkinningPassOnlyWhenAsked) {
   }
 }
 
+TEST_F(RealData, TheDefaultLadderHoldsTheSmallestUsefulLevel) {
+  // Clips of at most 64 frames, so the search's probes see every frame: the fewest joints
+  // of the ladder that meet the bound are a count whose next smaller count does not.
+  for (const char* file : {"characters/CesiumMan.glb", "characters/Orc.gltf"}) {
+    for (core::Variant variant : {core::Variant::kVP, core::Variant::kVPNOPD}) {
+      auto asset = io::LoadAssetFile(DataPath(file));
+      ASSERT_TRUE(asset.ok()) << file;
+      BakeRequest request;
+      request.character = *asset;
+      request.settings.variant = variant;
+      request.threads = 1;
+      request.measure_skinning_pass = false;
+      auto output = Bake(request);
+      ASSERT_TRUE(output.ok()) << file << ": " << output.status().ToString();
+      int count = 0;
+      for (const nlohmann::json& level : output->report["levels"]) {
+        if (level["max_vertex_error_pct"].get<double>() <= request.smallest_useful_error_pct) {
+          count = level["joints"].get<int>();
+        }
+      }
+      ASSERT_GT(count, 1) << file << " " << core::VariantName(variant);
+
+      auto inputs = PrepareInputs(request);
+      ASSERT_TRUE(inputs.ok());
+      ASSERT_LE(inputs->motion.frame_count, 64) << file;
+      const auto ranking = *core::RankJointsJob{inputs->character.get(), &inputs->motion, {}}.Run();
+      const auto prepared =
+          *core::PreparedMotion::Create(inputs->character, inputs->motion, request.settings);
+      const auto below = prepared->SolveLevel(
+          *core::ReduceSkeletonToCount(*inputs->character, ranking, count - 1),
+          core::PreparedMotion::Detail::kMaxVertexError);
+      ASSERT_TRUE(below.ok());
+      EXPECT_GT(below->optimized.max_vertex_error_pct, request.smallest_useful_error_pct)
+          << file << " " << core::VariantName(variant) << " " << count;
+    }
+  }
+}
+
 TEST_F(RealData, BakeWritesALevelSetThatDecodesToTheSolvedMatrices) {
   auto asset = io::LoadAssetFile(DataPath("characters/Fox.glb"));
   ASSERT_TRUE(asset.ok());
