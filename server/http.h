@@ -90,6 +90,32 @@ struct Response {
   void SetJson(int status_code, const std::string& json_text);
 };
 
+// The security headers the daemon sends, all in this one place (docs/SERVER.md,
+// docs/WEB.md).
+struct HeaderField {
+  const char* name;
+  const char* value;
+};
+// On every response: the declared Content-Type is final, a browser never sniffs one (a
+// problem+json body quoting the request path is never read as HTML).
+inline constexpr HeaderField kNoSniffHeader{"X-Content-Type-Options", "nosniff"};
+// On the web viewer's files in addition. The policy allows what the built page does and
+// nothing else: its own module script and style sheet, fetch and XMLHttpRequest to the
+// same origin's /v1 API, and blob: images. The exported levels have no textures, but the
+// page's stand-in original (the uploaded .glb, when the export route fails) may:
+// three.js's GLTFLoader turns each embedded image into a blob: URL the page itself made
+// and loads it with fetch and createImageBitmap (an <img> in Safari before 17). No
+// inline script or style attribute, eval, data: URL, worker, plug-in, <base>, form
+// submission or framing; no Referer sent anywhere.
+inline constexpr HeaderField kViewerSecurityHeaders[] = {
+    {"Content-Security-Policy",
+     "default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' blob:; "
+     "connect-src 'self' blob:; worker-src 'none'; object-src 'none'; base-uri 'none'; "
+     "frame-ancestors 'none'; form-action 'none'"},
+    {"Referrer-Policy", "no-referrer"},
+    {"X-Frame-Options", "DENY"},
+};
+
 // RFC 9457 problem details: application/problem+json with type, title, status, detail,
 // instance (the request path) and request_id.
 void SetProblem(const Request& request, Response& response, int status, std::string detail);

@@ -52,6 +52,12 @@ std::string HeaderSafe(std::string value) {
   return value;
 }
 
+// What every response carries: its request id and kNoSniffHeader.
+void SetCommonHeaders(httplib::Response& res, const std::string& request_id) {
+  res.set_header("X-Request-Id", request_id);
+  res.set_header(http::kNoSniffHeader.name, http::kNoSniffHeader.value);
+}
+
 // A header of the library's request (its map compares names case-insensitively and
 // looks up std::string keys only: one per thread is reused).
 std::optional<std::string_view> Find(const httplib::Request& req, std::string_view name) {
@@ -279,7 +285,7 @@ void HttpServer::Impl::Configure() {
           return httplib::Server::HandlerResponse::Unhandled;
         }
         const std::string id = t_request.active ? t_request.id : http::NewRequestId();
-        if (!res.has_header("X-Request-Id")) res.set_header("X-Request-Id", id);
+        if (!res.has_header("X-Request-Id")) SetCommonHeaders(res, id);
         const_cast<httplib::Request&>(req).ranges.clear();
         res.set_content(http::ProblemJson(res.status, http::StatusTitle(res.status), req.path, id),
                         "application/problem+json");
@@ -299,7 +305,7 @@ void HttpServer::Impl::Configure() {
     spdlog::error("[{}] uncaught exception: {}", id, http::Printable(what));
     res = httplib::Response();
     res.status = 500;
-    res.set_header("X-Request-Id", id);
+    SetCommonHeaders(res, id);
     res.set_content(http::ProblemJson(500, "internal error; the daemon's log has request id " + id,
                                       req.path, id),
                     "application/problem+json");
@@ -458,7 +464,7 @@ void HttpServer::Impl::Write(const httplib::Request& req, http::Response& out,
   // Ranges are answered by the routes; the library must not apply them again.
   const_cast<httplib::Request&>(req).ranges.clear();
   res.status = out.status;
-  res.set_header("X-Request-Id", t_request.id);
+  SetCommonHeaders(res, t_request.id);
   for (auto& [name, value] : out.headers) res.set_header(name, HeaderSafe(std::move(value)));
   std::function<void()> on_close = std::move(out.on_close);
   if (out.stream) {

@@ -345,7 +345,7 @@ bool NextEvent(EventStream& state, http::StreamSink& sink) {
 void ServeWebFile(const WebFile& file, const Request& request, Response& response) {
   response.SetHeader("ETag", file.etag);
   response.SetHeader("Cache-Control", file.cache_control);
-  response.SetHeader("X-Content-Type-Options", "nosniff");
+  for (const auto& [name, value] : http::kViewerSecurityHeaders) response.SetHeader(name, value);
   if (auto match = request.Header("if-none-match"); match && MatchesEtag(*match, file.etag)) {
     response.status = 304;
     return;

@@ -29,6 +29,7 @@ void ExpectRawProblem(const RawReply& reply, int status, const std::string& deta
   ASSERT_TRUE(problem.is_object()) << reply.body;
   EXPECT_EQ(problem.value("status", 0), status);
   EXPECT_EQ(problem.value("request_id", ""), RawConnection::Header(reply.head, "x-request-id"));
+  EXPECT_EQ(RawConnection::Header(reply.head, "x-content-type-options"), "nosniff") << reply.head;
   if (!detail_part.empty()) {
     EXPECT_NE(problem.value("detail", "").find(detail_part), std::string::npos) << reply.body;
   }

@@ -1,12 +1,15 @@
 // The web viewer's static files: what LoadWebAssets lists (and never lists), and what
-// a real motionlodd answers for them over HTTP: content types, cache headers, 304,
-// 404 for unknown paths and for every traversal attempt, and "/" without a built viewer.
+// a real motionlodd answers for them over HTTP: content types, cache and security headers,
+// 304, 404 for unknown paths and for every traversal attempt, and "/" without a built
+// viewer.
 #include <gtest/gtest.h>
 #include <httplib.h>
 
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <tuple>
+#include <vector>
 
 #include "server/web_assets.h"
 #include "tests/server/daemon.h"
@@ -163,6 +166,52 @@ TEST_F(WebServing, ServesTheListedFilesWithTypesAndCacheHeaders) {
   auto health = client_->Get("/healthz");
   ASSERT_TRUE(health);
   EXPECT_EQ(health->status, 200);
+}
+
+// The viewer's page and files carry the policy and framing headers (also on a 304, which
+// a browser may take its headers from); the API's answers, errors included, carry
+// nosniff but none of the page's policy.
+TEST_F(WebServing, SendsSecurityHeaders) {
+  const std::string etag = client_->Get("/assets/app-1a2b.js")->get_header_value("ETag");
+  ASSERT_FALSE(etag.empty());
+  for (const auto& [path, status, request_headers] :
+       std::vector<std::tuple<std::string, int, httplib::Headers>>{
+           {"/", 200, {}},
+           {"/index.html", 200, {}},
+           {"/assets/app-1a2b.js", 200, {}},
+           {"/assets/app-1a2b.css", 200, {}},
+           {"/favicon.svg", 200, {}},
+           {"/assets/app-1a2b.js", 304, {{"If-None-Match", etag}}}}) {
+    auto result = client_->Get(path.c_str(), request_headers);
+    ASSERT_TRUE(result) << path;
+    EXPECT_EQ(result->status, status) << path;
+    EXPECT_EQ(result->get_header_value("Content-Security-Policy"),
+              "default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' blob:; "
+              "connect-src 'self' blob:; worker-src 'none'; object-src 'none'; base-uri 'none'; "
+              "frame-ancestors 'none'; form-action 'none'")
+        << path;
+    EXPECT_EQ(result->get_header_value("X-Content-Type-Options"), "nosniff") << path;
+    EXPECT_EQ(result->get_header_value("Referrer-Policy"), "no-referrer") << path;
+    EXPECT_EQ(result->get_header_value("X-Frame-Options"), "DENY") << path;
+    EXPECT_EQ(result->get_header_value_count("X-Content-Type-Options"), 1u) << path;
+  }
+  auto post = client_->Post("/index.html", "x", "text/plain");
+  auto bakes = client_->Get("/v1/bakes");
+  auto health = client_->Get("/healthz");
+  auto missing = client_->Get(("/v1/bakes/" + std::string(64, '0')).c_str());
+  for (const auto* api : {&post, &bakes, &health, &missing}) {
+    ASSERT_TRUE(*api);
+    const httplib::Response& answer = **api;
+    EXPECT_EQ(answer.get_header_value("X-Content-Type-Options"), "nosniff") << answer.status;
+    EXPECT_EQ(answer.get_header_value_count("X-Content-Type-Options"), 1u) << answer.status;
+    EXPECT_FALSE(answer.has_header("Content-Security-Policy")) << answer.status;
+  }
+  EXPECT_EQ(post->status, 405);
+  EXPECT_EQ(bakes->status, 200);
+  EXPECT_EQ(bakes->get_header_value("Content-Type"), "application/json");
+  EXPECT_EQ(health->status, 200);
+  EXPECT_EQ(missing->status, 404);
+  EXPECT_EQ(missing->get_header_value("Content-Type"), "application/problem+json");
 }
 
 TEST_F(WebServing, UnknownPathsAndTraversalAttemptsAre404) {

@@ -7,6 +7,9 @@
 // GET /v1/bakes/{id}, reads the pixels of the 3D views (not blank), checks the crowd's
 // levels against the daemon's own choice (GET /v1/bakes/{id}/level?px=), shows a refused
 // upload's and a refused bake's problem detail, and saves screenshots in OUTPUT_DIR.
+// The page runs under the daemon's Content-Security-Policy: every securitypolicyviolation
+// event and every console error fails the test (a probe first shows that a violation is
+// caught).
 //
 // Environment (set by tests/web/CMakeLists.txt): MOTIONLODD, MOTIONLOD_SOURCE_DIR,
 // MOTIONLOD_SHARED_DATA, OUTPUT_DIR; CHROMIUM (default /usr/bin/chromium).
@@ -143,12 +146,70 @@ try {
     if (message.type() === 'error') consoleErrors.push(message.text());
   });
   page.on('pageerror', (error) => consoleErrors.push(String(error)));
+  // Every Content-Security-Policy violation on any page the test opens, reported from the
+  // page through a binding (set up by the browser, not subject to the policy).
+  const cspViolations = [];
+  await page.exposeFunction('motionlodReportCspViolation', (violation) => cspViolations.push(violation));
+  await page.addInitScript(() => {
+    document.addEventListener('securitypolicyviolation', (event) => {
+      window.motionlodReportCspViolation({
+        directive: event.effectiveDirective, blocked: event.blockedURI, source: `${event.sourceFile}:${event.lineNumber}`,
+      });
+    });
+  });
+  // The headers of the first response for the page and each of its files.
+  const viewerResponses = new Map();
+  page.on('response', (response) => {
+    const route = new URL(response.url()).pathname;
+    if ((route === '/' || route.startsWith('/assets/')) && !viewerResponses.has(route)) {
+      viewerResponses.set(route, response.headers());
+    }
+  });
+  const until = async (what, predicate) => {
+    for (let waited = 0; !predicate(); waited += 50) {
+      assert.ok(waited < 30000, `no ${what} within 30 s`);
+      await new Promise((resolve) => setTimeout(resolve, 50));
+    }
+  };
 
   await check('the daemon serves the viewer at / as HTML', async () => {
     const response = await page.goto(`${base}/`);
     assert.equal(response.status(), 200);
     assert.match(response.headers()['content-type'], /^text\/html/);
     await page.waitForSelector('#drop-zone');
+  });
+
+  await check('the viewer and its files carry the security headers', async () => {
+    const served = [...viewerResponses.keys()];
+    for (const kind of [/^\/$/, /^\/assets\/.+\.js$/, /^\/assets\/.+\.css$/]) {
+      assert.ok(served.some((route) => kind.test(route)), `${kind} not among ${served}`);
+    }
+    for (const [route, headers] of viewerResponses) {
+      assert.equal(headers['x-content-type-options'], 'nosniff', route);
+      assert.equal(headers['referrer-policy'], 'no-referrer', route);
+      assert.equal(headers['x-frame-options'], 'DENY', route);
+      assert.match(headers['content-security-policy'], /^default-src 'self'; script-src 'self'; style-src 'self';/, route);
+      assert.match(headers['content-security-policy'], /frame-ancestors 'none'/, route);
+    }
+  });
+
+  await check('a policy violation is caught (an inline style attribute is refused)', async () => {
+    const [violationsBefore, errorsBefore] = [cspViolations.length, consoleErrors.length];
+    const applied = await page.evaluate(() => {
+      const probe = document.createElement('div');
+      probe.setAttribute('style', 'color: rgb(1, 2, 3)');
+      document.body.append(probe);
+      const colour = getComputedStyle(probe).color;
+      probe.remove();
+      return colour === 'rgb(1, 2, 3)';
+    });
+    assert.equal(applied, false, 'the inline style was applied: no Content-Security-Policy in force');
+    await until('securitypolicyviolation event', () => cspViolations.length > violationsBefore);
+    await until('console error', () => consoleErrors.length > errorsBefore);
+    const probed = cspViolations.splice(violationsBefore);
+    assert.deepEqual(probed.map((v) => v.directive), ['style-src-attr']);
+    const logged = consoleErrors.splice(errorsBefore);
+    assert.ok(logged.every((text) => /Content Security Policy/.test(text)), logged.join('\n'));
   });
 
   await check('WebGL is available (software rendering)', async () => {
@@ -311,7 +372,7 @@ try {
     await page.waitForFunction(() => window.motionlodViewer.crowdMembers.length > 0, null, { timeout: 120000 });
   });
 
-  await check('a full page screenshot, and no script errors', async () => {
+  await check('a full page screenshot, no script errors and no policy violations', async () => {
     // Reported, not asserted (no timing assertions): the page's frame rate with both
     // views and the crowd drawing in software.
     const before = await page.evaluate(() => window.motionlodViewer.compareFrames);
@@ -319,6 +380,7 @@ try {
     const after = await page.evaluate(() => window.motionlodViewer.compareFrames);
     console.log(`     ${((after - before) / 5).toFixed(1)} frames per second (two views and a 300-character crowd)`);
     await page.screenshot({ path: path.join(outputDir, 'page.png'), fullPage: true });
+    assert.deepEqual(cspViolations, []);
     const unexpected = consoleErrors.filter((text) => !/Failed to load resource/.test(text));
     assert.deepEqual(unexpected, []);
   });

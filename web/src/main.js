@@ -341,8 +341,11 @@ function buildCrowd() {
     const item = document.createElement('span');
     item.dataset.level = String(level.index);
     item.dataset.count = String(count);
-    item.innerHTML = `<i style="background:${kLevelColours[level.index % kLevelColours.length]}"></i>`;
-    item.append(`${level.joints} joints: ${count}`);
+    // A style property set from script, not a style attribute: the page's policy allows no
+    // inline styles (docs/WEB.md).
+    const swatch = document.createElement('i');
+    swatch.style.background = kLevelColours[level.index % kLevelColours.length];
+    item.append(swatch, `${level.joints} joints: ${count}`);
     legend.append(item);
   }
 }
