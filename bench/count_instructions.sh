@@ -1,0 +1,54 @@
+#!/usr/bin/env bash
+# Instruction counts of bakes against one skinning pass (valgrind's callgrind, 1 thread):
+# exact and independent of the machine's load, so two trees compare where wall-clock
+# times on a shared machine cannot (docs/PERFORMANCE.md, "Where the time goes").
+#   bash bench/count_instructions.sh BUILD_DIR [FILE:VARIANT[:all] ...]
+# BUILD_DIR holds bench/motionlod_bench_bake_once (any MOTIONLOD_BUILD_BENCH=ON build).
+# FILE is relative to ../shared/data; ":all" bakes every level instead of the default
+# ladder. Without cases, a fixed set of short and long clips, rigid and not.
+# "bake" = the program's instructions less import (io::LoadAssetFile) and start-up;
+# "skin" = one pipeline::SkinningPassSeconds of the same inputs on 1 thread.
+set -euo pipefail
+build=${1:?usage: count_instructions.sh BUILD_DIR [FILE:VARIANT[:all] ...]}
+shift
+here=$(cd "$(dirname "$0")/.." && pwd)
+data="$here/../shared/data"
+driver="$build/bench/motionlod_bench_bake_once"
+command -v valgrind >/dev/null || { echo "count_instructions: valgrind is not installed (apt-get install valgrind)" >&2; exit 2; }
+[ -x "$driver" ] || { echo "count_instructions: no $driver (build the target motionlod_bench_bake_once)" >&2; exit 2; }
+[ -d "$data" ] || { echo "count_instructions: no $data" >&2; exit 2; }
+cases=("$@")
+if [ ${#cases[@]} -eq 0 ]; then
+  cases=(motions/55_01_cmu.fbx:vpno+pd motions/cmu_131_01.bvh:vpno+pd motions/09_11_cmu.fbx:vp+pd
+         characters/stormtrooper.dae:vp+pd characters/CesiumMan.glb:vp+pd characters/Orc.gltf:vpno+pd
+         characters/Fox.glb:vp characters/stormtrooper.dae:vpno:all)
+fi
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+# Instructions of one run of the driver: WHAT=bake counts (below main) and the level
+# workers' threads less import; WHAT=skin counts the skinning pass's thread alone.
+count() {
+  local what=$1
+  shift
+  valgrind --tool=callgrind --callgrind-out-file="$work/cg.out" "$driver" "$@" >/dev/null 2>&1
+  callgrind_annotate --inclusive=yes "$work/cg.out" | python3 -c '
+import re, sys
+text = sys.stdin.read()
+def inclusive(pattern):
+    m = re.search(r"^\s*([\d,]+) \([^)]*\)\s+" + pattern, text, re.M)
+    return int(m.group(1).replace(",", "")) if m else 0
+threads = inclusive(r"\S*pthread_create\.c:start_thread \[")
+if sys.argv[1] == "skin":
+    print(threads)
+else:
+    print(inclusive(r"\?\?\?:\(below main\)") + threads - inclusive(r"\S*motionlod::io::LoadAssetFile\("))' "$what"
+}
+printf '| case | bake (M instructions) | skin (M instructions) | bake / skin |\n|---|---:|---:|---:|\n'
+for c in "${cases[@]}"; do
+  IFS=: read -r file variant mode <<<"$c"
+  path=$(find "$data" -path "*$file" | head -n 1)
+  [ -n "$path" ] || { echo "count_instructions: no $file under $data" >&2; exit 2; }
+  bake=$(count bake "$path" "$variant" ${mode:+"$mode"})
+  skin=$(count skin "$path" "$variant" skin)
+  python3 -c "import sys; b, s = int(sys.argv[1]), int(sys.argv[2]); print(f'| \`{sys.argv[3]}\` | {b/1e6:.1f} | {s/1e6:.1f} | {b/s:.2f}x |')" "$bake" "$skin" "$c"
+done
