@@ -10,7 +10,7 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev
   libcpp-httplib-dev libsqlite3-dev libtomlplusplus-dev zlib1g-dev
   chromium  # the web viewer's end-to-end test drives it (never a downloaded browser)
-  bubblewrap  # the import worker's sandbox (server/import_sandbox.h)
+  bubblewrap libseccomp-dev  # the import worker's sandbox and its seccomp filter (server/import_sandbox.h)
   clang libclang-rt-14-dev  # libFuzzer targets (scripts/fuzz.sh)
 )
 # The web viewer builds with Node.js (18 or later): Debian's, unless one is installed.

@@ -2,8 +2,11 @@
 
 #include <fcntl.h>
 #include <poll.h>
+#include <sched.h>
+#include <seccomp.h>
 #include <signal.h>
 #include <spdlog/spdlog.h>
+#include <sys/mman.h>
 #include <sys/prctl.h>
 #include <sys/resource.h>
 #include <sys/time.h>
@@ -39,6 +42,87 @@ constexpr const char* kBubblewrapOptions[] = {
     "--symlink", "usr/lib", "/lib", "--symlink", "usr/lib64", "/lib64",
     "--symlink", "usr/bin", "/bin", "--proc", "/proc", "--dev", "/dev", "--chdir", "/"};
 // clang-format on
+
+// The descriptor on which bubblewrap reads the worker's seccomp filter (--seccomp).
+constexpr int kSeccompFilterFd = 3;
+constexpr const char* kSeccompFilterFdText = "3";
+
+// System calls the worker never makes (it reads stdin, runs Assimp in memory and writes
+// stdout), each a way out of or around the sandbox for a compromised importer: the
+// kernel's larger attack surfaces (bpf, perf, io_uring, userfaultfd, keyrings, modules),
+// other processes (ptrace, process_vm_*), namespaces, mounts and file handles, the
+// network, and the machine's state (reboot, clock, swap, I/O ports). They fail with EPERM;
+// everything else is allowed, so Assimp, zlib and the C++ runtime run unchanged.
+// clang-format off
+constexpr int kDeniedSyscalls[] = {
+    SCMP_SYS(ptrace), SCMP_SYS(process_vm_readv), SCMP_SYS(process_vm_writev),
+    SCMP_SYS(mount), SCMP_SYS(umount2), SCMP_SYS(pivot_root), SCMP_SYS(chroot),
+    SCMP_SYS(unshare), SCMP_SYS(setns),
+    SCMP_SYS(keyctl), SCMP_SYS(add_key), SCMP_SYS(request_key),
+    SCMP_SYS(bpf), SCMP_SYS(perf_event_open), SCMP_SYS(userfaultfd),
+    SCMP_SYS(kexec_load), SCMP_SYS(kexec_file_load),
+    SCMP_SYS(init_module), SCMP_SYS(finit_module), SCMP_SYS(delete_module),
+    SCMP_SYS(open_by_handle_at), SCMP_SYS(name_to_handle_at),
+    SCMP_SYS(io_uring_setup), SCMP_SYS(io_uring_enter), SCMP_SYS(io_uring_register),
+    SCMP_SYS(socket), SCMP_SYS(socketpair),
+    SCMP_SYS(reboot), SCMP_SYS(swapon), SCMP_SYS(swapoff), SCMP_SYS(acct),
+    SCMP_SYS(quotactl), SCMP_SYS(settimeofday), SCMP_SYS(clock_settime),
+    SCMP_SYS(clock_adjtime), SCMP_SYS(adjtimex), SCMP_SYS(syslog), SCMP_SYS(vhangup),
+    SCMP_SYS(lookup_dcookie), SCMP_SYS(iopl), SCMP_SYS(ioperm)};
+// clang-format on
+// clone() flags that make a new namespace (the low byte of clone's flags is the exit
+// signal, so CLONE_NEWTIME, which exists only for clone3 and unshare, is not among them).
+constexpr scmp_datum_t kNamespaceCloneFlags[] = {CLONE_NEWNS,  CLONE_NEWCGROUP, CLONE_NEWUTS,
+                                                 CLONE_NEWIPC, CLONE_NEWUSER,   CLONE_NEWPID,
+                                                 CLONE_NEWNET};
+// personality(2)'s query, which the C runtime's sanitizers make at start-up.
+constexpr scmp_datum_t kPersonalityQuery = 0xffffffff;
+
+// Builds the worker's seccomp filter (default: allow; kDeniedSyscalls, clone() into a new
+// namespace and personality() changes fail with EPERM; clone3, whose flags a filter cannot
+// read, fails with ENOSYS so that the C library falls back to clone) and writes it, as BPF,
+// to a new memory file read from its start. Returns the descriptor (close-on-exec).
+StatusOr<int> ExportSeccompFilter() {
+  const auto fail = [](const std::string& step, int error) -> Status {
+    return InvalidArgument("the importer's seccomp filter could not be built (" + step +
+                           "): " + std::strerror(error));
+  };
+  scmp_filter_ctx filter = seccomp_init(SCMP_ACT_ALLOW);
+  if (filter == nullptr) return fail("seccomp_init", ENOMEM);
+  const uint32_t eperm = SCMP_ACT_ERRNO(EPERM);
+  int result = 0;
+  for (int syscall : kDeniedSyscalls) {
+    if (result == 0) result = seccomp_rule_add_array(filter, eperm, syscall, 0, nullptr);
+  }
+  for (scmp_datum_t flag : kNamespaceCloneFlags) {
+    const scmp_arg_cmp makes_namespace = {0, SCMP_CMP_MASKED_EQ, flag, flag};
+    if (result == 0)
+      result = seccomp_rule_add_array(filter, eperm, SCMP_SYS(clone), 1, &makes_namespace);
+  }
+  const scmp_arg_cmp changes_personality = {0, SCMP_CMP_NE, kPersonalityQuery, 0};
+  if (result == 0)
+    result = seccomp_rule_add_array(filter, eperm, SCMP_SYS(personality), 1, &changes_personality);
+  if (result == 0)
+    result = seccomp_rule_add_array(filter, SCMP_ACT_ERRNO(ENOSYS), SCMP_SYS(clone3), 0, nullptr);
+  if (result != 0) {
+    seccomp_release(filter);
+    return fail("seccomp_rule_add", -result);
+  }
+  const int fd = memfd_create("motionlod-import-seccomp", MFD_CLOEXEC);
+  if (fd < 0) {
+    const int saved = errno;
+    seccomp_release(filter);
+    return fail("memfd_create", saved);
+  }
+  result = seccomp_export_bpf(filter, fd);
+  seccomp_release(filter);
+  if (result != 0 || lseek(fd, 0, SEEK_SET) != 0) {
+    const int saved = result != 0 ? -result : errno;
+    close(fd);
+    return fail("seccomp_export_bpf", saved);
+  }
+  return fd;
+}
 
 // AddressSanitizer reserves terabytes of shadow address space: RLIMIT_AS cannot apply.
 #if defined(__SANITIZE_ADDRESS__)
@@ -226,10 +310,18 @@ StatusOr<std::shared_ptr<const io::Asset>> ImportSandbox::Run(
   // Everything the child needs is built before fork(): after it, only async-signal-safe
   // calls (no allocation: another thread may hold the allocator's lock).
   std::vector<std::string> args;
+  int seccomp_filter = -1;  // bubblewrap applies it last, just before it runs the worker
   if (isolation_ == Isolation::kBubblewrap) {
+    StatusOr<int> exported = ExportSeccompFilter();
+    if (!exported.ok()) {
+      spdlog::error("import worker not started: {}", exported.status().message());
+      return exported.status();
+    }
+    seccomp_filter = *exported;
     args = {FindOnPath("bwrap")};
     args.insert(args.end(), std::begin(kBubblewrapOptions), std::end(kBubblewrapOptions));
-    args.insert(args.end(), {"--ro-bind", worker_path_, kWorkerInSandbox, kWorkerInSandbox});
+    args.insert(args.end(), {"--seccomp", kSeccompFilterFdText, "--ro-bind", worker_path_,
+                             kWorkerInSandbox, kWorkerInSandbox});
   } else {
     args = {worker_path_};
   }
@@ -251,6 +343,7 @@ StatusOr<std::shared_ptr<const io::Asset>> ImportSandbox::Run(
     in.Close();
     out.Close();
     err.Close();
+    CloseFd(seccomp_filter);
     return Status(StatusCode::kInternal,
                   std::string("cannot create the import worker's pipes: ") + std::strerror(saved));
   }
@@ -260,7 +353,13 @@ StatusOr<std::shared_ptr<const io::Asset>> ImportSandbox::Run(
         dup2(err.write, STDERR_FILENO) < 0) {
       _exit(127);
     }
-    close_range(3, ~0U, 0);  // no listening socket, database or blob descriptor leaks in
+    // bubblewrap reads the filter on a known descriptor, inherited across exec.
+    if (seccomp_filter >= 0 &&
+        (dup2(seccomp_filter, kSeccompFilterFd) < 0 || fcntl(kSeccompFilterFd, F_SETFD, 0) != 0)) {
+      _exit(127);
+    }
+    // No listening socket, database or blob descriptor leaks in.
+    close_range(seccomp_filter >= 0 ? kSeccompFilterFd + 1 : 3, ~0U, 0);
     setpgid(0, 0);
     prctl(PR_SET_PDEATHSIG, SIGKILL);  // a daemon killed mid-import takes its worker along
     if (getppid() != daemon_pid) _exit(127);
@@ -273,6 +372,7 @@ StatusOr<std::shared_ptr<const io::Asset>> ImportSandbox::Run(
     _exit(127);
   }
   const int fork_errno = errno;
+  CloseFd(seccomp_filter);
   CloseFd(in.read);
   CloseFd(out.write);
   CloseFd(err.write);

@@ -8,8 +8,13 @@
 // user, network, PID, IPC, UTS and mount namespaces (no network at all), all
 // capabilities dropped, and a file system of /usr read-only, a private /proc and /dev and
 // the worker binary: no host file (/etc, the data directory, the upload's neighbours) is
-// visible. The files travel on the worker's stdin and the result on its stdout, in the
-// checked format of io/asset_wire.h; the reply is decoded and validated as hostile.
+// visible. Bubblewrap also installs a seccomp filter (libseccomp) under which the system
+// calls the worker never needs fail with EPERM (ptrace, mount, unshare, bpf, io_uring,
+// socket and more: the list is in import_sandbox.cc and docs/RELIABILITY.md); a filter
+// that cannot be built fails the import (and so, at start-up, the bubblewrap probe): no
+// worker runs in bubblewrap without it. The files
+// travel on the worker's stdin and the result on its stdout, in the checked format of
+// io/asset_wire.h; the reply is decoded and validated as hostile.
 #pragma once
 
 #include <cstdint>

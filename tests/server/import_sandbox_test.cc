@@ -122,6 +122,45 @@ TEST(ImportSandbox, AWorkerOverTheAddressSpaceLimitFailsCleanly) {
   ExpectLimitError(sandbox->Import({{"huge.x", testing::kHugeVertexCountX}}, {}), "out of memory");
 }
 
+// Under bubblewrap the worker runs behind the seccomp filter: a real import still gives
+// the in-process result, and a probe worker's attempts at the denied system calls fail
+// with EPERM (clone3 with ENOSYS, for the C library to fall back to clone) while fork and
+// the personality query go through. The same probe as a plain process, without the
+// filter, may open a socket: the EPERMs are the filter's doing.
+TEST(ImportSandbox, TheSeccompFilterDeniesWhatTheWorkerNeverNeeds) {
+  const std::unique_ptr<ImportSandbox> sandbox = MakeSandbox();
+  ASSERT_NE(sandbox, nullptr);
+  if (sandbox->isolation() != Isolation::kBubblewrap) {
+    GTEST_SKIP() << "bubblewrap does not work here: " << sandbox->fallback_reason();
+  }
+  const std::vector<io::SourceFile> sample =
+      Files({SourcePath("samples/Rig_Medium_MovementBasic.glb")});
+  const auto in_process = io::LoadAsset(sample);
+  ASSERT_TRUE(in_process.ok()) << in_process.status().ToString();
+  const auto isolated = sandbox->Import(sample, {});
+  ASSERT_TRUE(isolated.ok()) << isolated.status().ToString();
+  EXPECT_EQ(io::EncodeImportReply(*isolated), io::EncodeImportReply(*in_process));
+
+  const auto attempts = [](const ImportSandbox& probe, const std::vector<std::string>& calls) {
+    std::vector<io::SourceFile> files;
+    for (const std::string& call : calls) files.push_back({call, ""});
+    const auto result = probe.Import(files, {});
+    EXPECT_FALSE(result.ok());
+    return result.ok() ? std::string() : result.status().message();
+  };
+  auto filtered = ImportSandbox::Create("bwrap", MOTIONLOD_SYSCALL_PROBE_WORKER, {});
+  ASSERT_TRUE(filtered.ok()) << filtered.status().ToString();
+  EXPECT_EQ(
+      attempts(**filtered, {"ptrace", "socket", "perf_event_open", "io_uring_setup", "unshare",
+                            "clone_newuser", "personality", "clone3", "fork", "personality_query"}),
+      "ptrace=EPERM socket=EPERM perf_event_open=EPERM io_uring_setup=EPERM "
+      "unshare=EPERM clone_newuser=EPERM personality=EPERM clone3=ENOSYS fork=ok "
+      "personality_query=ok");
+  auto unfiltered = ImportSandbox::Create("process", MOTIONLOD_SYSCALL_PROBE_WORKER, {});
+  ASSERT_TRUE(unfiltered.ok()) << unfiltered.status().ToString();
+  EXPECT_EQ(attempts(**unfiltered, {"socket", "fork"}), "socket=ok fork=ok");
+}
+
 TEST(ImportSandbox, ModesAndWorkerPathAreChecked) {
   const std::unique_ptr<ImportSandbox> process = MakeSandbox({}, "process");
   ASSERT_NE(process, nullptr);
