@@ -6,6 +6,8 @@
 #include <seccomp.h>
 #include <signal.h>
 #include <spdlog/spdlog.h>
+#include <linux/filter.h>
+#include <linux/seccomp.h>
 #include <sys/mman.h>
 #include <sys/prctl.h>
 #include <sys/resource.h>
@@ -315,14 +317,32 @@ StatusOr<std::shared_ptr<const io::Asset>> ImportSandbox::Run(
   // Everything the child needs is built before fork(): after it, only async-signal-safe
   // calls (no allocation: another thread may hold the allocator's lock).
   std::vector<std::string> args;
-  int seccomp_filter = -1;  // bubblewrap applies it last, just before it runs the worker
-  if (isolation_ == Isolation::kBubblewrap) {
-    StatusOr<int> exported = ExportSeccompFilter();
-    if (!exported.ok()) {
-      spdlog::error("import worker not started: {}", exported.status().message());
-      return exported.status();
+  StatusOr<int> exported = ExportSeccompFilter();
+  if (!exported.ok()) {
+    spdlog::error("import worker not started: {}", exported.status().message());
+    return exported.status();
+  }
+  // Under bubblewrap, which applies it last, just before it runs the worker, the filter is
+  // read from a descriptor; a plain process installs it itself right before exec.
+  int seccomp_filter = *exported;
+  std::vector<sock_filter> filter_program;
+  if (isolation_ == Isolation::kProcess) {
+    const off_t bytes = lseek(seccomp_filter, 0, SEEK_END);
+    filter_program.resize(bytes > 0 ? static_cast<size_t>(bytes) / sizeof(sock_filter) : 0);
+    const size_t wanted = filter_program.size() * sizeof(sock_filter);
+    const bool read_whole = bytes > 0 && pread(seccomp_filter, filter_program.data(), wanted, 0) ==
+                                             static_cast<ssize_t>(wanted);
+    CloseFd(seccomp_filter);
+    seccomp_filter = -1;
+    if (!read_whole) {
+      const Status status = InvalidArgument(
+          "the importer's seccomp filter could not be built (reading the exported program)");
+      spdlog::error("import worker not started: {}", status.message());
+      return status;
     }
-    seccomp_filter = *exported;
+  }
+  const sock_fprog filter{static_cast<unsigned short>(filter_program.size()), filter_program.data()};
+  if (isolation_ == Isolation::kBubblewrap) {
     args = {FindOnPath("bwrap")};
     args.insert(args.end(), std::begin(kBubblewrapOptions), std::end(kBubblewrapOptions));
     args.insert(args.end(), {"--seccomp", kSeccompFilterFdText, "--ro-bind", worker_path_,
@@ -373,6 +393,7 @@ StatusOr<std::shared_ptr<const io::Asset>> ImportSandbox::Run(
     setrlimit(RLIMIT_CORE, &no_core);
     if (limit_memory) setrlimit(RLIMIT_AS, &memory);
     if (isolation_ == Isolation::kBubblewrap) ExecGuarded(argv.data(), empty_environment, daemon_pid);
+    if (prctl(PR_SET_SECCOMP, SECCOMP_MODE_FILTER, &filter) != 0) _exit(127);
     execve(argv[0], argv.data(), empty_environment);
     _exit(127);
   }
