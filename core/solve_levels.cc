@@ -133,15 +133,20 @@ struct PreparedMotion::Impl {
     kAll,             // both and the sampled figures: every field of LevelErrors
   };
   // In one pass over the frames (the maximum search then revisits the frames it needs).
+  // A finite `decide_within` (length) makes the maximum search a decision: it stops at the
+  // first vertex past it and refines no bound within it, so the maximum it reports is only
+  // on the right side of it.
   void EvaluateErrors(const DeltaView& delta, const std::vector<int>& kept, Figures figures,
-                      LevelErrors& out) const;
+                      LevelErrors& out,
+                      double decide_within = std::numeric_limits<double>::infinity()) const;
   std::vector<size_t> ActivePairs(const DeltaView& delta) const;
   void FrameQuadraticErrors(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame,
                             const std::vector<size_t>& active_pairs, const std::vector<int>& kept,
                             int t, LevelErrors& out) const;
   void FrameBounds(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame, int t,
                    MaxSearchBounds& bounds) const;
-  void MaxVertexError(const DeltaView& delta, const MaxSearchBounds& bounds, LevelErrors& out) const;
+  void MaxVertexError(const DeltaView& delta, const MaxSearchBounds& bounds, double decide_within,
+                      LevelErrors& out) const;
   // Area-weighted sums over the sample of |v - v'|, |v - v'|^2, the normals' angle and
   // |n - n'|^2.
   struct SampleSums {
@@ -370,7 +375,7 @@ std::vector<size_t> PreparedMotion::Impl::ActivePairs(const DeltaView& delta) co
 }
 
 void PreparedMotion::Impl::EvaluateErrors(const DeltaView& delta, const std::vector<int>& kept,
-                                          Figures figures, LevelErrors& out) const {
+                                          Figures figures, LevelErrors& out, double decide_within) const {
   const bool quadratic = figures != Figures::kMaxVertexError;
   const bool maximum = figures != Figures::kQuadratic;
   const bool sampled = figures == Figures::kAll;
@@ -421,7 +426,7 @@ void PreparedMotion::Impl::EvaluateErrors(const DeltaView& delta, const std::vec
     const double mean_sq = std::accumulate(out.ep_vertex.begin(), out.ep_vertex.end(), 0.0) / frames;
     out.rms_vertex_error_pct = 100.0 * std::sqrt(mean_sq) / character->height();
   }
-  if (maximum) MaxVertexError(delta, bounds, out);
+  if (maximum) MaxVertexError(delta, bounds, decide_within, out);
   if (sampled) {
     // Ratio estimates: the sample's mean scaled by how far its mean square is from the
     // exact one over every vertex and frame (the quadratic forms). A strided sample that
@@ -516,7 +521,7 @@ void PreparedMotion::Impl::FrameBounds(const Eigen::Matrix<double, Eigen::Dynami
 }
 
 void PreparedMotion::Impl::MaxVertexError(const DeltaView& delta, const MaxSearchBounds& bounds,
-                                          LevelErrors& out) const {
+                                          double decide_within, LevelErrors& out) const {
   // Exact maximum of |d_i(t)|, d_i(t) = sum_g w_ig Delta_g(t) [v0_i; 1], over all vertices
   // and frames without evaluating most of them. For a box with center c and half extents
   // h in the bind pose, every vertex v in it has
@@ -553,55 +558,61 @@ void PreparedMotion::Impl::MaxVertexError(const DeltaView& delta, const MaxSearc
 
   double best = 0;
   int best_frame = 0, best_vertex = 0;
-  const double negligible = kNegligible * c.height();
+  // Nothing at or below `floor` is refined: negligible, or within the decision's bound.
+  const double floor = std::max(kNegligible * c.height(), std::isfinite(decide_within) ? decide_within : 0.0);
   // The exact evaluations blend in float (the skin's own precision): twice the throughput,
   // and the figure is a display quantity.
   std::vector<Affine34d> frame_delta(n);
   std::vector<PaddedDelta> frame_delta_f(n, PaddedDelta::Zero());
   std::vector<int> group_order(n);
-  for (int t : frame_order) {
-    if (bounds.frame_bound[t] <= std::max(best, negligible)) break;
-    for (int k = 0; k < n; ++k) {
-      frame_delta[k] = delta.At(k, t);
-      frame_delta_f[k].topRows<3>() = frame_delta[k].cast<float>();
-    }
-    const double* bound = bounds.group_bound.data() + static_cast<size_t>(t) * n;
-    const Vec3d* norms = bounds.column_norms.data() + static_cast<size_t>(t) * n;
-    std::iota(group_order.begin(), group_order.end(), 0);
-    std::sort(group_order.begin(), group_order.end(), [&](int a, int b) { return bound[a] > bound[b]; });
-    for (int j : group_order) {
-      if (bound[j] <= std::max(best, negligible)) break;
-      const Vec3d& group_center = c.group_centers()[j];
-      const Vec3d& group_half = c.group_half_extents()[j];
-      const double refined = WeightedBound(
-          group_influences.data() + group_influence_offsets[j],
-          group_influences.data() + group_influence_offsets[j + 1],
-          [&](int g) { return BoxBound(frame_delta[g], norms[g], group_center, group_half); });
-      if (refined <= std::max(best, negligible)) continue;
-      for (uint32_t cluster = group_clusters[j]; cluster < group_clusters[j + 1]; ++cluster) {
-        const Vec3d& center = c.cluster_centers()[cluster];
-        const Vec3d& half = c.cluster_half_extents()[cluster];
-        const double cluster_bound = WeightedBound(
-            cluster_influences.data() + cluster_influence_offsets[cluster],
-            cluster_influences.data() + cluster_influence_offsets[cluster + 1],
-            [&](int g) { return BoxBound(frame_delta[g], norms[g], center, half); });
-        if (cluster_bound <= std::max(best, negligible)) continue;
-        for (uint32_t e = cluster_vertex_offsets[cluster]; e < cluster_vertex_offsets[cluster + 1]; ++e) {
-          const uint32_t i = cluster_vertices[e];
-          PaddedDelta blended = PaddedDelta::Zero();
-          for (uint32_t g = skin.influence_offsets[i]; g < skin.influence_offsets[i + 1]; ++g) {
-            blended.noalias() += skin.influence_weights[g] * frame_delta_f[skin.influence_joints[g]];
-          }
-          const double length = (blended.leftCols<3>() * skin.positions[i] + blended.col(3)).norm();
-          if (length > best) {
-            best = length;
-            best_frame = t;
-            best_vertex = static_cast<int>(i);
+  // A lambda, so that a decided search returns from every loop at once.
+  const auto search = [&] {
+    for (int t : frame_order) {
+      if (bounds.frame_bound[t] <= std::max(best, floor)) break;
+      for (int k = 0; k < n; ++k) {
+        frame_delta[k] = delta.At(k, t);
+        frame_delta_f[k].topRows<3>() = frame_delta[k].cast<float>();
+      }
+      const double* bound = bounds.group_bound.data() + static_cast<size_t>(t) * n;
+      const Vec3d* norms = bounds.column_norms.data() + static_cast<size_t>(t) * n;
+      std::iota(group_order.begin(), group_order.end(), 0);
+      std::sort(group_order.begin(), group_order.end(), [&](int a, int b) { return bound[a] > bound[b]; });
+      for (int j : group_order) {
+        if (bound[j] <= std::max(best, floor)) break;
+        const Vec3d& group_center = c.group_centers()[j];
+        const Vec3d& group_half = c.group_half_extents()[j];
+        const double refined = WeightedBound(
+            group_influences.data() + group_influence_offsets[j],
+            group_influences.data() + group_influence_offsets[j + 1],
+            [&](int g) { return BoxBound(frame_delta[g], norms[g], group_center, group_half); });
+        if (refined <= std::max(best, floor)) continue;
+        for (uint32_t cluster = group_clusters[j]; cluster < group_clusters[j + 1]; ++cluster) {
+          const Vec3d& center = c.cluster_centers()[cluster];
+          const Vec3d& half = c.cluster_half_extents()[cluster];
+          const double cluster_bound = WeightedBound(
+              cluster_influences.data() + cluster_influence_offsets[cluster],
+              cluster_influences.data() + cluster_influence_offsets[cluster + 1],
+              [&](int g) { return BoxBound(frame_delta[g], norms[g], center, half); });
+          if (cluster_bound <= std::max(best, floor)) continue;
+          for (uint32_t e = cluster_vertex_offsets[cluster]; e < cluster_vertex_offsets[cluster + 1]; ++e) {
+            const uint32_t i = cluster_vertices[e];
+            PaddedDelta blended = PaddedDelta::Zero();
+            for (uint32_t g = skin.influence_offsets[i]; g < skin.influence_offsets[i + 1]; ++g) {
+              blended.noalias() += skin.influence_weights[g] * frame_delta_f[skin.influence_joints[g]];
+            }
+            const double length = (blended.leftCols<3>() * skin.positions[i] + blended.col(3)).norm();
+            if (length > best) {
+              best = length;
+              best_frame = t;
+              best_vertex = static_cast<int>(i);
+              if (best > decide_within) return;
+            }
           }
         }
       }
     }
-  }
+  };
+  search();
   out.max_vertex_error_pct = 100.0 * best / c.height();
   out.max_vertex_frame = best_frame;
   out.max_vertex_index = best_vertex;
@@ -796,14 +807,29 @@ StatusOr<Eigen::MatrixXd> PreparedMotion::SolveLeastSquares(const ReducedSkeleto
   return std::move(system->x);
 }
 
-StatusOr<LevelResult> PreparedMotion::SolveLevel(const ReducedSkeleton& level, Detail detail) const {
-  const Impl& d = *impl_;
+namespace {
+
+// A level's matrices in the variant: the least-squares solution, projected on rotations
+// and with re-solved translations for the rigid variants (4m x 3T, as LevelSystem::x), and
+// the view of its Delta_k = K'_phi(k) - K_k for the errors.
+struct VariantSolution {
+  MatrixXd x;
+  bool unchanged = false;  // x is the original matrices (nothing removed, nothing projected)
+
+  // Reads x, so it lives as long as this.
+  PreparedMotion::Impl::DeltaView Delta(const PreparedMotion::Impl& d, const ReducedSkeleton& level) const {
+    PreparedMotion::Impl::DeltaView view{unchanged ? &d.kt : &x, std::vector<int>(d.n), &d.kt};
+    for (int k = 0; k < d.n; ++k) view.solution_row[k] = unchanged ? 4 * k : 4 * level.joint_to_slot[k];
+    return view;
+  }
+};
+
+StatusOr<VariantSolution> SolveVariant(const PreparedMotion::Impl& d, const ReducedSkeleton& level) {
   auto system = SolveSystem(d, level);
   if (!system.ok()) return system.status();
   const int n = d.n;
   const int m = level.kept_count();
   const int cols = 3 * d.frames;
-  const std::vector<int>& phi = level.joint_to_slot;
   const MatrixXd& g = system->g;
   const MatrixXd& bt = system->bt;
   MatrixXd& x = system->x;
@@ -857,6 +883,19 @@ StatusOr<LevelResult> PreparedMotion::SolveLevel(const ReducedSkeleton& level, D
       }
     }
   }
+  return VariantSolution{std::move(x), unchanged};
+}
+
+}  // namespace
+
+StatusOr<LevelResult> PreparedMotion::SolveLevel(const ReducedSkeleton& level) const {
+  const Impl& d = *impl_;
+  auto solution = SolveVariant(d, level);
+  if (!solution.ok()) return solution.status();
+  const int n = d.n;
+  const int m = level.kept_count();
+  const std::vector<int>& phi = level.joint_to_slot;
+  const MatrixXd& x = solution->x;
 
   LevelResult result;
   result.skeleton = level;
@@ -868,20 +907,24 @@ StatusOr<LevelResult> PreparedMotion::SolveLevel(const ReducedSkeleton& level, D
     }
   }
 
-  // Delta_k = K'_phi(k) - K_k, or nothing at all where the solution is the original.
-  Impl::DeltaView optimized{&x, std::vector<int>(n), &d.kt};
-  for (int k = 0; k < n; ++k) optimized.solution_row[k] = unchanged ? 4 * k : 4 * phi[k];
-  if (unchanged) optimized.solution = &d.kt;
-  if (detail == Detail::kMaxVertexError) {
-    d.EvaluateErrors(optimized, level.kept_joints, Impl::Figures::kMaxVertexError, result.optimized);
-    return result;
-  }
-  d.EvaluateErrors(optimized, level.kept_joints, Impl::Figures::kAll, result.optimized);
+  d.EvaluateErrors(solution->Delta(d, level), level.kept_joints, Impl::Figures::kAll, result.optimized);
   // The baseline: Delta_k = K_kept(phi(k)) - K_k.
   Impl::DeltaView baseline{&d.kt, std::vector<int>(n), &d.kt};
   for (int k = 0; k < n; ++k) baseline.solution_row[k] = 4 * level.kept_joints[phi[k]];
   d.EvaluateErrors(baseline, level.kept_joints, Impl::Figures::kAll, result.baseline);
   return result;
+}
+
+StatusOr<bool> PreparedMotion::MaxVertexErrorWithin(const ReducedSkeleton& level, double bound_pct) const {
+  if (!(bound_pct > 0)) return InvalidArgument("MaxVertexErrorWithin: the bound must be positive");
+  const Impl& d = *impl_;
+  auto solution = SolveVariant(d, level);
+  if (!solution.ok()) return solution.status();
+  LevelErrors errors;
+  const double bound = bound_pct / 100.0 * d.character->height();
+  d.EvaluateErrors(solution->Delta(d, level), level.kept_joints, Impl::Figures::kMaxVertexError, errors,
+                   bound);
+  return errors.max_vertex_error_pct <= bound_pct;
 }
 
 }  // namespace motionlod::core

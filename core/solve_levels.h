@@ -127,15 +127,15 @@ class PreparedMotion {
   // K_j(t)^T stacked: 4n x 3T, block (4j, 3t) = K_j(t)^T.
   const Eigen::MatrixXd& original_matrices() const;
 
-  // How much of LevelErrors a solve fills in.
-  enum class Detail {
-    kFull,            // every figure, optimised and baseline
-    kMaxVertexError,  // only optimized.max_vertex_error_pct and its frame and vertex:
-                      // enough to steer a search over levels at a third of the cost
-  };
+  // Solves one level with every figure, optimised and baseline. Allocates per level, never
+  // per frame.
+  StatusOr<LevelResult> SolveLevel(const ReducedSkeleton& level) const;
 
-  // Solves one level. Allocates per level, never per frame.
-  StatusOr<LevelResult> SolveLevel(const ReducedSkeleton& level, Detail detail = Detail::kFull) const;
+  // Whether the level's optimised maximum vertex error (LevelErrors::max_vertex_error_pct)
+  // is at most bound_pct > 0: what a search over levels needs, decided without finding the
+  // maximum. The search stops at the first vertex past the bound, and refines no vertex
+  // bound within it, so it costs a fraction of SolveLevel.
+  StatusOr<bool> MaxVertexErrorWithin(const ReducedSkeleton& level, double bound_pct) const;
 
   // The unconstrained least-squares solution in double precision, before any polar
   // projection: 4m x 3T, block (4s, 3t) = K'_s(t)^T. What SolveLevel starts from.

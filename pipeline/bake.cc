@@ -33,8 +33,7 @@ Status CancelledStatus() { return Status(StatusCode::kNotFound, "the bake was ca
 Status SolveCounts(const core::PreparedMotion& prepared, const core::JointRanking& ranking,
                    const std::vector<int>& counts, int threads,
                    std::map<int, core::LevelResult>& out,
-                   const std::function<void(int)>& on_done, const std::atomic<bool>* cancel,
-                   core::PreparedMotion::Detail detail = core::PreparedMotion::Detail::kFull) {
+                   const std::function<void(int)>& on_done, const std::atomic<bool>* cancel) {
   std::vector<std::optional<core::LevelResult>> results(counts.size());
   std::vector<Status> errors(counts.size());
   ParallelFor(
@@ -46,7 +45,7 @@ Status SolveCounts(const core::PreparedMotion& prepared, const core::JointRankin
           errors[index] = level.status();
           return;
         }
-        auto result = prepared.SolveLevel(*level, detail);
+        auto result = prepared.SolveLevel(*level);
         if (!result.ok()) {
           errors[index] = result.status();
           return;
@@ -215,8 +214,9 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
     // is within the bound. The ladder's exact errors bracket it; bisection narrows the
     // bracket (the error grows as joints go, though not strictly, so this finds a count
     // that meets the bound with the one below failing). Probes only steer the search: on a
-    // long motion they run on at most kProbeFrames evenly strided frames and fill in only
-    // the maximum error; the chosen level is then solved in full on every frame.
+    // long motion they run on at most kProbeFrames evenly strided frames, and they only
+    // decide whether the maximum error is within the bound; the chosen level is then
+    // solved in full on every frame.
     const double bound = request.smallest_useful_error_pct;
     int lo = minimum, hi = n;
     for (const auto& [count, result] : solved) {
@@ -245,15 +245,14 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
         if (!created.ok()) return created.status();
         probe = *created;
       }
-      std::map<int, core::LevelResult> probed;
       while (lo < hi) {
+        if (Cancelled(cancel)) return CancelledStatus();
         const int mid = lo + (hi - lo) / 2;
-        if (Status status = SolveCounts(*probe, *ranking, {mid}, 1, probed, {}, cancel,
-                                        core::PreparedMotion::Detail::kMaxVertexError);
-            !status.ok()) {
-          return status;
-        }
-        if (probed.at(mid).optimized.max_vertex_error_pct <= bound) {
+        auto level = core::ReduceSkeletonToCount(*inputs->character, *ranking, mid);
+        if (!level.ok()) return level.status();
+        auto within = probe->MaxVertexErrorWithin(*level, bound);
+        if (!within.ok()) return within.status();
+        if (*within) {
           hi = mid;
         } else {
           lo = mid + 1;

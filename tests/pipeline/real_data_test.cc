@@ -238,6 +238,30 @@ TEST_F(RealData, VertexFiguresMatchBruteForce) {
   }
 }
 
+// The decision agrees with the exact maximum on either side of it.
+TEST_F(RealData, MaxVertexErrorWithinDecidesLikeTheExactMaximum) {
+  for (const char* file : {"characters/stormtrooper.dae", "characters/Orc.gltf", "motions/09_11_cmu.fbx"}) {
+    const RealScene s = Load(file, 0, 80);
+    const int n = s.inputs.character->joint_count();
+    for (core::Variant variant : {core::Variant::kVP, core::Variant::kVPNOPD}) {
+      const auto prepared = Prepare(s, variant);
+      for (int kept : {n / 2, n / 3, n / 4, 2}) {
+        const core::ReducedSkeleton level = Level(s, kept);
+        const auto exact = prepared->SolveLevel(level);
+        ASSERT_TRUE(exact.ok());
+        const double maximum = exact->optimized.max_vertex_error_pct;
+        const std::string where = std::string(file) + " " + core::VariantName(variant) + " kept " +
+                                  std::to_string(kept) + " max " + std::to_string(maximum);
+        ASSERT_GT(maximum, 1e-3) << where;
+        EXPECT_TRUE(*prepared->MaxVertexErrorWithin(level, maximum * 1.001)) << where;
+        EXPECT_FALSE(*prepared->MaxVertexErrorWithin(level, maximum * 0.999)) << where;
+        EXPECT_FALSE(*prepared->MaxVertexErrorWithin(level, maximum * 0.2)) << where;
+      }
+      EXPECT_FALSE(prepared->MaxVertexErrorWithin(Level(s, 2), 0).ok());
+    }
+  }
+}
+
 TEST_F(RealData, TheReportTimesASkinningPassOnlyWhenAsked) {
   auto asset = io::LoadAssetFile(DataPath("characters/Fox.glb"));
   ASSERT_TRUE(asset.ok());
@@ -285,8 +309,7 @@ TEST_F(RealData, TheDefaultLadderHoldsTheSmallestUsefulLevel) {
       const auto prepared =
           *core::PreparedMotion::Create(inputs->character, inputs->motion, request.settings);
       const auto below = prepared->SolveLevel(
-          *core::ReduceSkeletonToCount(*inputs->character, ranking, count - 1),
-          core::PreparedMotion::Detail::kMaxVertexError);
+          *core::ReduceSkeletonToCount(*inputs->character, ranking, count - 1));
       ASSERT_TRUE(below.ok());
       EXPECT_GT(below->optimized.max_vertex_error_pct, request.smallest_useful_error_pct)
           << file << " " << core::VariantName(variant) << " " << count;
