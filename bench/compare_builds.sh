@@ -1,0 +1,63 @@
+#!/usr/bin/env bash
+# Wall-clock A/B of two builds of the bake benchmark, side by side on the same machine:
+# the two programs run alternately, ROUNDS rounds of 3 repetitions each, and every bake is
+# compared as a ratio to its own build's skinning pass (docs/PERFORMANCE.md, round 4).
+#   bash bench/compare_builds.sh BASE_BUILD NEW_BUILD [FILTER]
+# BASE_BUILD and NEW_BUILD hold bench/motionlod_bench_bake (MOTIONLOD_BUILD_BENCH=ON; e.g.
+# a `git worktree` of the base commit configured like build-bench/). FILTER is a Google
+# Benchmark regex over bake/ cases; the matching skin/ cases are added. ROUNDS (default
+# 2) and MIN_TIME (default 0.3 s) come from the environment.
+set -euo pipefail
+base=${1:?usage: compare_builds.sh BASE_BUILD NEW_BUILD [FILTER]}
+new=${2:?usage: compare_builds.sh BASE_BUILD NEW_BUILD [FILTER]}
+filter=${3:-'(09_11_cmu.fbx|stormtrooper.dae|Orc.gltf)/(vp|vpno\+pd)/default'}
+rounds=${ROUNDS:-2}
+min_time=${MIN_TIME:-0.3}
+here=$(cd "$(dirname "$0")/.." && pwd)
+data="$here/../shared/data"
+[ -d "$data" ] || { echo "compare_builds: no $data" >&2; exit 2; }
+for build in "$base" "$new"; do
+  [ -x "$build/bench/motionlod_bench_bake" ] || {
+    echo "compare_builds: no $build/bench/motionlod_bench_bake" >&2
+    exit 2
+  }
+done
+# The skinning passes of the files the filter names, e.g. skin/Orc.gltf/threads:1.
+cases=$(sed -E 's/^\(([^)]*)\)\/.*$/\1/; t; s/\/.*$//' <<<"$filter")
+full="bake/$filter/threads:1|skin/($cases)/threads:1"
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+for ((round = 0; round < rounds; ++round)); do
+  for side in base new; do
+    build=$base
+    [ "$side" = new ] && build=$new
+    "$build/bench/motionlod_bench_bake" --data="$data" --benchmark_filter="$full" \
+      --benchmark_min_time="$min_time" --benchmark_repetitions=3 \
+      --benchmark_report_aggregates_only=true --benchmark_format=json 2>/dev/null \
+      >"$work/$side.$round.json"
+  done
+done
+python3 - "$work" "$rounds" <<'EOF'
+import json, statistics, sys
+work, rounds = sys.argv[1], int(sys.argv[2])
+times = {}
+for side in ("base", "new"):
+    for r in range(rounds):
+        for b in json.load(open(f"{work}/{side}.{r}.json"))["benchmarks"]:
+            if b.get("aggregate_name") != "median":
+                continue
+            name = b["run_name"].replace("/threads:1", "").replace("/manual_time", "")
+            scale = {"ns": 1e-6, "us": 1e-3, "ms": 1.0, "s": 1e3}[b["time_unit"]]
+            times.setdefault((name, side), []).append(b["real_time"] * scale)
+print("| case (1 thread) | base ms (ratio) | new ms (ratio) | change |")
+print("|---|---|---|---|")
+for name in sorted({n for n, _ in times if n.startswith("bake/")}):
+    case = name.split("/")[1]
+    row = []
+    for side in ("base", "new"):
+        bake = statistics.median(times[(name, side)])
+        skin = statistics.median(times[("skin/" + case, side)])
+        row.append((bake, bake / skin))
+    change = 100 * (row[1][0] / row[0][0] - 1)
+    print(f"| {name[5:]} | {row[0][0]:.3g} ({row[0][1]:.2f}x) | {row[1][0]:.3g} ({row[1][1]:.2f}x) | {change:+.0f}% |")
+EOF
