@@ -564,7 +564,8 @@ void PreparedMotion::Impl::MaxVertexError(const DeltaView& delta, const MaxSearc
   // and the figure is a display quantity.
   std::vector<Affine34d> frame_delta(n);
   std::vector<PaddedDelta> frame_delta_f(n, PaddedDelta::Zero());
-  std::vector<int> group_order(n);
+  std::vector<int> group_order;
+  group_order.reserve(n);
   // A lambda, so that a decided search returns from every loop at once.
   const auto search = [&] {
     for (int t : frame_order) {
@@ -575,7 +576,11 @@ void PreparedMotion::Impl::MaxVertexError(const DeltaView& delta, const MaxSearc
       }
       const double* bound = bounds.group_bound.data() + static_cast<size_t>(t) * n;
       const Vec3d* norms = bounds.column_norms.data() + static_cast<size_t>(t) * n;
-      std::iota(group_order.begin(), group_order.end(), 0);
+      // Only the groups that can beat the best so far, by decreasing bound.
+      group_order.clear();
+      for (int j = 0; j < n; ++j) {
+        if (bound[j] > std::max(best, floor)) group_order.push_back(j);
+      }
       std::sort(group_order.begin(), group_order.end(), [&](int a, int b) { return bound[a] > bound[b]; });
       for (int j : group_order) {
         if (bound[j] <= std::max(best, floor)) break;
