@@ -87,7 +87,7 @@ struct PreparedMotion::Impl {
   // each of them would touch its own cache lines of every skin array in every frame.
   struct SampleVertex {
     Vec3f position, normal;
-    float area;
+    double area;
     uint32_t influence_end;  // its influences end here in sample_influences
   };
   std::vector<int> sample_frames;
@@ -329,7 +329,7 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
     for (uint32_t e = skin.influence_offsets[i]; e < skin.influence_offsets[i + 1]; ++e) {
       d.sample_influences.push_back({skin.influence_joints[e], skin.influence_weights[e]});
     }
-    d.sample_vertices.push_back({skin.positions[i], skin.normals[i], static_cast<float>(c.vertex_areas()[i]),
+    d.sample_vertices.push_back({skin.positions[i], skin.normals[i], c.vertex_areas()[i],
                                  static_cast<uint32_t>(d.sample_influences.size())});
     d.sample_area += d.sample_vertices.back().area;
   }
