@@ -248,7 +248,8 @@ StatusOr<Stages> BakeEveryLevel(const core::RawCharacter& raw, const io::Asset& 
   begin = Clock::now();
   core::SolveSettings settings;
   settings.variant = variant;
-  auto prepared = core::PreparedMotion::Create(*character, *motion, settings);
+  auto prepared = core::PreparedMotion::Create(*character, *motion, settings,
+                                               core::PreparedMotion::Workload::kEveryLevel);
   if (!prepared.ok()) return prepared.status();
   stages.prepare = SecondsSince(begin);
 

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <numeric>
+#include <optional>
 
 #include <Eigen/Cholesky>
 #include <Eigen/SparseCholesky>
@@ -75,6 +76,13 @@ struct PreparedMotion::Impl {
   std::vector<Eigen::Matrix4d> pair_cp;
   std::vector<Eigen::Matrix3d> pair_cn;
   SparseMatrixd q_fit;            // alpha Cp + beta_fit Cn
+  // For the quadratic forms in the kept joints' space (see KeptForms; Workload::kEveryLevel
+  // only, empty otherwise): with every frame's matrices shifted by the root's translation
+  // r(t), Kr_k(t) = K_k(t) - [0 | r(t)], the products Fp = Cp Kr and Fn = Cn Kr (4n x 3T,
+  // as kt; Fn's translation rows are zero) and the constants tr(Kr^T Cp Kr),
+  // tr(Kr^T Cn Kr) per frame.
+  MatrixXd fp_root, fn_root;
+  std::vector<double> const_p, const_n;
   // The right-hand sides are assembled transposed (3T x 4m, see SolveSpd)
   // from transposed copies: ft = (q_fit * kt)^T and ktt = kt^T, both 3T x 4n.
   MatrixXd ft, ktt;
@@ -140,9 +148,29 @@ struct PreparedMotion::Impl {
                       LevelErrors& out,
                       double decide_within = std::numeric_limits<double>::infinity()) const;
   std::vector<size_t> ActivePairs(const DeltaView& delta) const;
+  // A level's quadratic forms in its kept joints' space. With Delta_k = X_s - K_k, s = phi(k),
+  //   sum_kl tr(Delta_k^T C_kl Delta_l) = sum_su tr(X_s^T G_su X_u) - 2 sum_k tr(X_s^T F_k)
+  //                                       + tr(K^T C K),   G_su = sum_{phi(k)=s, phi(l)=u} C_kl,
+  // so a frame costs the slot pairs (fewer as joints go) and n 4x3 products instead of
+  // every joint pair. Evaluated with the root's translation taken out of X and K (which
+  // leaves Delta as it is), so that the constant is of the character's size and not of its
+  // distance from the origin; a frame whose result is still below kKeptFormsPrecision of
+  // that constant falls back to the joint pairs (the subtraction would lose digits).
+  struct KeptForms {
+    std::vector<std::pair<int, int>> slot_pairs;  // s <= u
+    std::vector<Eigen::Matrix4d> slot_cp;         // pair factors folded in, as pair_cp
+    std::vector<Eigen::Matrix3d> slot_cn;
+    const MatrixXd* solution = nullptr;           // X: rows 4s, 3T columns
+    std::vector<int> slot_of;                     // phi(k)
+  };
+  static constexpr double kKeptFormsPrecision = 1e-8;
+  // The kept-space forms for an optimised level's Delta, or nothing where the joint pairs
+  // cost less (levels that keep most joints) or Delta is not of that form (baselines).
+  std::optional<KeptForms> MakeKeptForms(const DeltaView& delta, const std::vector<int>& kept,
+                                         size_t active_pairs) const;
   void FrameQuadraticErrors(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame,
-                            const std::vector<size_t>& active_pairs, const std::vector<int>& kept,
-                            int t, LevelErrors& out) const;
+                            const std::vector<size_t>& active_pairs, const KeptForms* kept_forms,
+                            const std::vector<int>& kept, int t, LevelErrors& out) const;
   void FrameBounds(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame, int t,
                    MaxSearchBounds& bounds) const;
   void MaxVertexError(const DeltaView& delta, const MaxSearchBounds& bounds, double decide_within,
@@ -218,7 +246,7 @@ const MatrixXd& PreparedMotion::original_matrices() const { return impl_->kt; }
 
 StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
     std::shared_ptr<const Character> character, const Motion& motion,
-    const SolveSettings& settings) {
+    const SolveSettings& settings, Workload workload) {
   if (!character) return InvalidArgument("PreparedMotion: no character");
   if (Status status = settings.Validate(); !status.ok()) return status;
   if (Status status = ValidateMotion(motion, *character); !status.ok()) return status;
@@ -269,6 +297,39 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
     d.cp.setFromTriplets(cp_triplets.begin(), cp_triplets.end());
     d.cn.resize(4 * n, 4 * n);
     d.cn.setFromTriplets(cn_triplets.begin(), cn_triplets.end());
+  }
+
+  // The kept-space forms' products and constants (see KeptForms), frame by frame.
+  if (workload == Workload::kEveryLevel) {
+    d.fp_root = MatrixXd::Zero(4 * n, 3 * frames);
+    d.fn_root = MatrixXd::Zero(4 * n, 3 * frames);
+    d.const_p.assign(frames, 0.0);
+    d.const_n.assign(frames, 0.0);
+    Eigen::Matrix<double, Eigen::Dynamic, 3> shifted(4 * n, 3);
+    for (int t = 0; t < frames; ++t) {
+      shifted = d.kt.middleCols<3>(3 * t);
+      const Eigen::RowVector3d root = d.kt.block<1, 3>(3, 3 * t);
+      for (int k = 0; k < n; ++k) shifted.row(4 * k + 3) -= root;
+      auto fp = d.fp_root.middleCols<3>(3 * t);
+      auto fn = d.fn_root.middleCols<3>(3 * t);
+      for (size_t q = 0; q < d.pairs.size(); ++q) {
+        const auto [k, l] = d.pairs[q];
+        // The moments themselves: pair_cp and pair_cn have off-diagonal pairs doubled.
+        const double single = k == l ? 1.0 : 0.5;
+        const Eigen::Matrix4d cp = single * d.pair_cp[q];
+        const Eigen::Matrix3d cn = single * d.pair_cn[q];
+        fp.block<4, 3>(4 * k, 0).noalias() += cp * shifted.block<4, 3>(4 * l, 0);
+        fn.block<3, 3>(4 * k, 0).noalias() += cn * shifted.block<3, 3>(4 * l, 0);
+        if (k != l) {
+          fp.block<4, 3>(4 * l, 0).noalias() += cp * shifted.block<4, 3>(4 * k, 0);
+          fn.block<3, 3>(4 * l, 0).noalias() += cn * shifted.block<3, 3>(4 * k, 0);
+        }
+      }
+      for (int k = 0; k < n; ++k) {
+        d.const_p[t] += shifted.block<4, 3>(4 * k, 0).cwiseProduct(fp.block<4, 3>(4 * k, 0)).sum();
+        d.const_n[t] += shifted.block<3, 3>(4 * k, 0).cwiseProduct(fn.block<3, 3>(4 * k, 0)).sum();
+      }
+    }
   }
 
   const std::vector<double>& lengths = c.subtree_lengths();
@@ -392,6 +453,8 @@ void PreparedMotion::Impl::EvaluateErrors(const DeltaView& delta, const std::vec
   if (!moves) return;
 
   const std::vector<size_t> active_pairs = quadratic ? ActivePairs(delta) : std::vector<size_t>{};
+  const std::optional<KeptForms> kept_forms =
+      quadratic ? MakeKeptForms(delta, kept, active_pairs.size()) : std::nullopt;
   MaxSearchBounds bounds;
   if (maximum) {
     bounds.column_norms.resize(static_cast<size_t>(frames) * n);
@@ -412,7 +475,7 @@ void PreparedMotion::Impl::EvaluateErrors(const DeltaView& delta, const std::vec
   Eigen::Matrix<double, Eigen::Dynamic, 3> frame(4 * n, 3);
   for (int t = 0; t < frames; ++t) {
     delta.Frame(t, frame);
-    if (quadratic) FrameQuadraticErrors(frame, active_pairs, kept, t, out);
+    if (quadratic) FrameQuadraticErrors(frame, active_pairs, kept_forms ? &*kept_forms : nullptr, kept, t, out);
     if (maximum) FrameBounds(frame, t, bounds);
     if (sampled && next_sample < sample_frames.size() && sample_frames[next_sample] == t) {
       FrameSampledErrors(frame, next_sample++, scratch, sums);
@@ -446,18 +509,83 @@ void PreparedMotion::Impl::EvaluateErrors(const DeltaView& delta, const std::vec
   }
 }
 
+std::optional<PreparedMotion::Impl::KeptForms> PreparedMotion::Impl::MakeKeptForms(
+    const DeltaView& delta, const std::vector<int>& kept, size_t active_pairs) const {
+  const int m = static_cast<int>(kept.size());
+  if (const_p.empty() || delta.solution == delta.original) return std::nullopt;
+  KeptForms forms;
+  forms.solution = delta.solution;
+  forms.slot_of.resize(n);
+  for (int k = 0; k < n; ++k) forms.slot_of[k] = delta.solution_row[k] / 4;
+  std::vector<int> index(static_cast<size_t>(m) * m, -1);
+  for (size_t q = 0; q < pairs.size(); ++q) {
+    const int a = forms.slot_of[pairs[q].first], b = forms.slot_of[pairs[q].second];
+    const int s = std::min(a, b), u = std::max(a, b);
+    int& slot_pair = index[static_cast<size_t>(s) * m + u];
+    if (slot_pair < 0) {
+      slot_pair = static_cast<int>(forms.slot_pairs.size());
+      forms.slot_pairs.emplace_back(s, u);
+      forms.slot_cp.push_back(Eigen::Matrix4d::Zero());
+      forms.slot_cn.push_back(Eigen::Matrix3d::Zero());
+    }
+    // A pair of distinct joints in one slot counts twice in the double sum, as pair_cp has
+    // it; so does a pair across two slots (tr(X_s^T C X_u) = tr(X_u^T C X_s), C symmetric).
+    forms.slot_cp[slot_pair] += pair_cp[q];
+    forms.slot_cn[slot_pair] += pair_cn[q];
+  }
+  // A frame then costs the slot pairs and one 4x3 product per joint against the active
+  // joint pairs: not worth it for the levels that keep most joints.
+  if (4 * (forms.slot_pairs.size() + n / 2) > 3 * active_pairs) return std::nullopt;
+  return forms;
+}
+
 void PreparedMotion::Impl::FrameQuadraticErrors(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame,
                                                 const std::vector<size_t>& active_pairs,
+                                                const KeptForms* kept_forms,
                                                 const std::vector<int>& kept, int t,
                                                 LevelErrors& out) const {
-  // sum_kl tr(Delta_k^T C_kl Delta_l) over the pairs.
+  // sum_kl tr(Delta_k^T C_kl Delta_l) over the joint pairs.
+  const auto joint_pairs = [&](double& ep, double& en) {
+    ep = en = 0;
+    for (size_t q : active_pairs) {
+      const auto [k, l] = pairs[q];
+      const Eigen::Matrix<double, 4, 3> dk = frame.block<4, 3>(4 * k, 0);
+      const Eigen::Matrix<double, 4, 3> dl = frame.block<4, 3>(4 * l, 0);
+      ep += dk.cwiseProduct(pair_cp[q] * dl).sum();
+      en += dk.topRows<3>().cwiseProduct(pair_cn[q] * dl.topRows<3>()).sum();
+    }
+  };
   double ep = 0, en = 0;
-  for (size_t q : active_pairs) {
-    const auto [k, l] = pairs[q];
-    const Eigen::Matrix<double, 4, 3> dk = frame.block<4, 3>(4 * k, 0);
-    const Eigen::Matrix<double, 4, 3> dl = frame.block<4, 3>(4 * l, 0);
-    ep += dk.cwiseProduct(pair_cp[q] * dl).sum();
-    en += dk.topRows<3>().cwiseProduct(pair_cn[q] * dl.topRows<3>()).sum();
+  if (kept_forms == nullptr) {
+    joint_pairs(ep, en);
+  } else {
+    // X_s^T with the root's translation taken out: rows 4s..4s+3 of frame t's columns.
+    const int m = static_cast<int>(kept.size());
+    const Eigen::RowVector3d root = kt.block<1, 3>(3, 3 * t);
+    Eigen::Matrix<double, Eigen::Dynamic, 3> x(4 * m, 3);
+    for (int s = 0; s < m; ++s) {
+      x.block<4, 3>(4 * s, 0) = kept_forms->solution->block<4, 3>(4 * s, 3 * t);
+      x.row(4 * s + 3) -= root;
+    }
+    double quadratic_p = 0, quadratic_n = 0;
+    for (size_t q = 0; q < kept_forms->slot_pairs.size(); ++q) {
+      const auto [s, u] = kept_forms->slot_pairs[q];
+      const Eigen::Matrix<double, 4, 3> xs = x.block<4, 3>(4 * s, 0);
+      const Eigen::Matrix<double, 4, 3> xu = x.block<4, 3>(4 * u, 0);
+      quadratic_p += xs.cwiseProduct(kept_forms->slot_cp[q] * xu).sum();
+      quadratic_n += xs.topRows<3>().cwiseProduct(kept_forms->slot_cn[q] * xu.topRows<3>()).sum();
+    }
+    double linear_p = 0, linear_n = 0;
+    for (int k = 0; k < n; ++k) {
+      const Eigen::Matrix<double, 4, 3> xs = x.block<4, 3>(4 * kept_forms->slot_of[k], 0);
+      linear_p += xs.cwiseProduct(fp_root.block<4, 3>(4 * k, 3 * t)).sum();
+      linear_n += xs.topRows<3>().cwiseProduct(fn_root.block<3, 3>(4 * k, 3 * t)).sum();
+    }
+    ep = quadratic_p - 2 * linear_p + const_p[t];
+    en = quadratic_n - 2 * linear_n + const_n[t];
+    if (ep < kKeptFormsPrecision * const_p[t] || en < kKeptFormsPrecision * const_n[t]) {
+      joint_pairs(ep, en);
+    }
   }
   out.ep_vertex[t] = std::max(0.0, ep);
   out.en_vertex[t] = std::max(0.0, en);

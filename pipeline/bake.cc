@@ -172,7 +172,10 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
   const int minimum = ranking->locked_count;
 
   report_progress(0.05, "prepare");
-  auto prepared = core::PreparedMotion::Create(inputs->character, motion, request.settings);
+  auto prepared = core::PreparedMotion::Create(
+      inputs->character, motion, request.settings,
+      request.all_levels ? core::PreparedMotion::Workload::kEveryLevel
+                         : core::PreparedMotion::Workload::kSomeLevels);
   if (!prepared.ok()) return prepared.status();
   if (Cancelled(cancel)) return CancelledStatus();
 
@@ -276,7 +279,8 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
                                   core::Variant::kVPNOPD}) {
       core::SolveSettings settings = request.settings;
       settings.variant = variant;
-      auto variant_prepared = core::PreparedMotion::Create(inputs->character, motion, settings);
+      auto variant_prepared = core::PreparedMotion::Create(inputs->character, motion, settings,
+                                                           core::PreparedMotion::Workload::kEveryLevel);
       if (!variant_prepared.ok()) return variant_prepared.status();
       std::vector<int> every;
       for (int count = n; count >= minimum; --count) every.push_back(count);

@@ -238,6 +238,47 @@ TEST_F(RealData, VertexFiguresMatchBruteForce) {
   }
 }
 
+// Workload::kEveryLevel evaluates the quadratic forms of levels with few joints in the kept
+// joints' space: the same errors to rounding, at every level, optimised and baseline.
+TEST_F(RealData, EveryLevelWorkloadGivesTheSameErrors) {
+  for (const char* file : {"characters/stormtrooper.dae", "characters/Orc.gltf", "motions/cmu_131_01.bvh"}) {
+    // Far from the origin (1000 heights away) the expanded forms would lose every digit if
+    // the root's translation were not taken out.
+    for (const double distance : {0.0, 1000.0}) {
+      RealScene s = Load(file, 0, 60);
+      const double height = s.inputs.character->height();
+      for (core::Affine34d& w : s.inputs.motion.joint_world) w(0, 3) += distance * height;
+      const int n = s.inputs.character->joint_count();
+      for (core::Variant variant : {core::Variant::kVP, core::Variant::kVPNOPD}) {
+        core::SolveSettings settings;
+        settings.variant = variant;
+        const auto some = *core::PreparedMotion::Create(s.inputs.character, s.inputs.motion, settings);
+        const auto every = *core::PreparedMotion::Create(s.inputs.character, s.inputs.motion, settings,
+                                                         core::PreparedMotion::Workload::kEveryLevel);
+        for (int kept = n; kept >= s.ranking.locked_count; --kept) {
+          const core::ReducedSkeleton level = Level(s, kept);
+          const auto a = some->SolveLevel(level);
+          const auto b = every->SolveLevel(level);
+          ASSERT_TRUE(a.ok() && b.ok());
+          const std::string where = std::string(file) + " " + core::VariantName(variant) + " at " +
+                                    std::to_string(distance) + " kept " + std::to_string(kept);
+          for (size_t t = 0; t < a->optimized.e.size(); ++t) {
+            EXPECT_NEAR(b->optimized.ep_vertex[t], a->optimized.ep_vertex[t],
+                        1e-9 * a->optimized.ep_vertex[t] + 1e-12 * height * height)
+                << where << " frame " << t;
+            EXPECT_NEAR(b->optimized.en_vertex[t], a->optimized.en_vertex[t],
+                        1e-9 * a->optimized.en_vertex[t] + 1e-12)
+                << where << " frame " << t;
+            EXPECT_NEAR(b->optimized.e[t], a->optimized.e[t], 1e-9 * a->optimized.e[t] + 1e-13) << where;
+            EXPECT_EQ(b->baseline.e[t], a->baseline.e[t]) << where;
+          }
+          EXPECT_EQ(b->optimized.max_vertex_error_pct, a->optimized.max_vertex_error_pct) << where;
+        }
+      }
+    }
+  }
+}
+
 // The decision agrees with the exact maximum on either side of it.
 TEST_F(RealData, MaxVertexErrorWithinDecidesLikeTheExactMaximum) {
   for (const char* file : {"characters/stormtrooper.dae", "characters/Orc.gltf", "motions/09_11_cmu.fbx"}) {
