@@ -160,12 +160,14 @@ struct PreparedMotion::Impl {
     std::vector<std::pair<int, int>> slot_pairs;  // s <= u
     std::vector<Eigen::Matrix4d> slot_cp;         // pair factors folded in, as pair_cp
     std::vector<Eigen::Matrix3d> slot_cn;
-    const MatrixXd* solution = nullptr;           // X: rows 4s, 3T columns
+    const MatrixXd* solution = nullptr;           // X, 3T columns
+    std::vector<int> slot_row;                    // X_s^T is the 4 rows from slot_row[s]
     std::vector<int> slot_of;                     // phi(k)
   };
   static constexpr double kKeptFormsPrecision = 1e-8;
-  // The kept-space forms for an optimised level's Delta, or nothing where the joint pairs
-  // cost less (levels that keep most joints) or Delta is not of that form (baselines).
+  // The kept-space forms for a level's Delta (X_s the solution's slot s for an optimised
+  // level, K of the kept joint for a baseline), or nothing where the joint pairs cost less
+  // (levels that keep most joints, baselines that remove few).
   std::optional<KeptForms> MakeKeptForms(const DeltaView& delta, const std::vector<int>& kept,
                                          size_t active_pairs) const;
   void FrameQuadraticErrors(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame,
@@ -299,7 +301,37 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
     d.cn.setFromTriplets(cn_triplets.begin(), cn_triplets.end());
   }
 
-  // The kept-space forms' products and constants (see KeptForms), frame by frame.
+  const std::vector<double>& lengths = c.subtree_lengths();
+  const double total_length = std::accumulate(lengths.begin(), lengths.end(), 0.0);
+  d.joint_point.resize(n);
+  d.joint_axis.resize(n);
+  d.joint_weight.resize(n);
+  for (int j = 0; j < n; ++j) {
+    const Affine34d& bind = c.skeleton().bind_world[j];
+    d.joint_point[j] << bind.col(3), 1.0;
+    d.joint_axis[j] << bind.col(1).normalized(), 0.0;
+    d.joint_weight[j] = total_length > 0 ? settings.joint_weight * lengths[j] / total_length : 0.0;
+  }
+
+  // Normalisation: the largest error of the root-only, unoptimised skeleton.
+  {
+    const Impl::DeltaView root_delta{&d.kt, std::vector<int>(n, 0), &d.kt};
+    d.alpha = d.beta = 1.0;
+    LevelErrors root_only;
+    d.EvaluateErrors(root_delta, {0}, Impl::Figures::kQuadratic, root_only);
+    double max_ep = 0, max_en = 0;
+    for (int t = 0; t < frames; ++t) {
+      max_ep = std::max(max_ep, root_only.ep_vertex[t] + root_only.ep_joint[t]);
+      max_en = std::max(max_en, root_only.en_vertex[t] + root_only.en_joint[t]);
+    }
+    // A motion that never leaves the root's rigid frame has nothing to normalise by.
+    d.alpha = max_ep > 1e-20 * c.height() * c.height() ? 1.0 / max_ep : 1.0 / (c.height() * c.height());
+    d.beta = max_en > 1e-20 ? 1.0 / max_en : 1.0;
+  }
+  d.beta_fit = FitsNormals(settings.variant) ? d.beta : 0.0;
+  // The kept-space forms' products and constants (see KeptForms), frame by frame; after
+  // the normalisation, whose root-only errors stay in the joint pairs' form so that alpha
+  // and beta, and with them every solution, do not depend on the workload.
   if (workload == Workload::kEveryLevel) {
     d.fp_root = MatrixXd::Zero(4 * n, 3 * frames);
     d.fn_root = MatrixXd::Zero(4 * n, 3 * frames);
@@ -331,35 +363,6 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
       }
     }
   }
-
-  const std::vector<double>& lengths = c.subtree_lengths();
-  const double total_length = std::accumulate(lengths.begin(), lengths.end(), 0.0);
-  d.joint_point.resize(n);
-  d.joint_axis.resize(n);
-  d.joint_weight.resize(n);
-  for (int j = 0; j < n; ++j) {
-    const Affine34d& bind = c.skeleton().bind_world[j];
-    d.joint_point[j] << bind.col(3), 1.0;
-    d.joint_axis[j] << bind.col(1).normalized(), 0.0;
-    d.joint_weight[j] = total_length > 0 ? settings.joint_weight * lengths[j] / total_length : 0.0;
-  }
-
-  // Normalisation: the largest error of the root-only, unoptimised skeleton.
-  {
-    const Impl::DeltaView root_delta{&d.kt, std::vector<int>(n, 0), &d.kt};
-    d.alpha = d.beta = 1.0;
-    LevelErrors root_only;
-    d.EvaluateErrors(root_delta, {0}, Impl::Figures::kQuadratic, root_only);
-    double max_ep = 0, max_en = 0;
-    for (int t = 0; t < frames; ++t) {
-      max_ep = std::max(max_ep, root_only.ep_vertex[t] + root_only.ep_joint[t]);
-      max_en = std::max(max_en, root_only.en_vertex[t] + root_only.en_joint[t]);
-    }
-    // A motion that never leaves the root's rigid frame has nothing to normalise by.
-    d.alpha = max_ep > 1e-20 * c.height() * c.height() ? 1.0 / max_ep : 1.0 / (c.height() * c.height());
-    d.beta = max_en > 1e-20 ? 1.0 / max_en : 1.0;
-  }
-  d.beta_fit = FitsNormals(settings.variant) ? d.beta : 0.0;
   d.q_fit = d.alpha * d.cp + d.beta_fit * d.cn;
   d.ktt = d.kt.transpose();
   // F^T = Kt^T Q (Q is symmetric): each nonzero of Q adds one contiguous column of all
@@ -512,11 +515,25 @@ void PreparedMotion::Impl::EvaluateErrors(const DeltaView& delta, const std::vec
 std::optional<PreparedMotion::Impl::KeptForms> PreparedMotion::Impl::MakeKeptForms(
     const DeltaView& delta, const std::vector<int>& kept, size_t active_pairs) const {
   const int m = static_cast<int>(kept.size());
-  if (const_p.empty() || delta.solution == delta.original) return std::nullopt;
+  if (const_p.empty()) return std::nullopt;
   KeptForms forms;
   forms.solution = delta.solution;
+  forms.slot_row.resize(m);
   forms.slot_of.resize(n);
-  for (int k = 0; k < n; ++k) forms.slot_of[k] = delta.solution_row[k] / 4;
+  if (delta.solution != delta.original) {  // optimised: solution rows are slots
+    for (int s = 0; s < m; ++s) forms.slot_row[s] = 4 * s;
+    for (int k = 0; k < n; ++k) forms.slot_of[k] = delta.solution_row[k] / 4;
+  } else {  // baseline: solution rows are the kept joints' own in K
+    std::vector<int> slot_of_joint(n, -1);
+    for (int s = 0; s < m; ++s) {
+      forms.slot_row[s] = 4 * kept[s];
+      slot_of_joint[kept[s]] = s;
+    }
+    for (int k = 0; k < n; ++k) {
+      forms.slot_of[k] = slot_of_joint[delta.solution_row[k] / 4];
+      if (forms.slot_of[k] < 0) return std::nullopt;
+    }
+  }
   std::vector<int> index(static_cast<size_t>(m) * m, -1);
   for (size_t q = 0; q < pairs.size(); ++q) {
     const int a = forms.slot_of[pairs[q].first], b = forms.slot_of[pairs[q].second];
@@ -564,7 +581,7 @@ void PreparedMotion::Impl::FrameQuadraticErrors(const Eigen::Matrix<double, Eige
     const Eigen::RowVector3d root = kt.block<1, 3>(3, 3 * t);
     Eigen::Matrix<double, Eigen::Dynamic, 3> x(4 * m, 3);
     for (int s = 0; s < m; ++s) {
-      x.block<4, 3>(4 * s, 0) = kept_forms->solution->block<4, 3>(4 * s, 3 * t);
+      x.block<4, 3>(4 * s, 0) = kept_forms->solution->block<4, 3>(kept_forms->slot_row[s], 3 * t);
       x.row(4 * s + 3) -= root;
     }
     double quadratic_p = 0, quadratic_n = 0;
