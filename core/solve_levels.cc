@@ -170,8 +170,10 @@ struct PreparedMotion::Impl {
   // (levels that keep most joints, baselines that remove few).
   std::optional<KeptForms> MakeKeptForms(const DeltaView& delta, const std::vector<int>& kept,
                                          size_t active_pairs) const;
+  // kept_frame: scratch for X(t), 4m x 3, where kept_forms is given.
   void FrameQuadraticErrors(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame,
                             const std::vector<size_t>& active_pairs, const KeptForms* kept_forms,
+                            Eigen::Matrix<double, Eigen::Dynamic, 3>& kept_frame,
                             const std::vector<int>& kept, int t, LevelErrors& out) const;
   void FrameBounds(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame, int t,
                    MaxSearchBounds& bounds) const;
@@ -458,6 +460,7 @@ void PreparedMotion::Impl::EvaluateErrors(const DeltaView& delta, const std::vec
   const std::vector<size_t> active_pairs = quadratic ? ActivePairs(delta) : std::vector<size_t>{};
   const std::optional<KeptForms> kept_forms =
       quadratic ? MakeKeptForms(delta, kept, active_pairs.size()) : std::nullopt;
+  Eigen::Matrix<double, Eigen::Dynamic, 3> kept_frame(kept_forms ? 4 * kept.size() : 0, 3);
   MaxSearchBounds bounds;
   if (maximum) {
     bounds.column_norms.resize(static_cast<size_t>(frames) * n);
@@ -478,7 +481,9 @@ void PreparedMotion::Impl::EvaluateErrors(const DeltaView& delta, const std::vec
   Eigen::Matrix<double, Eigen::Dynamic, 3> frame(4 * n, 3);
   for (int t = 0; t < frames; ++t) {
     delta.Frame(t, frame);
-    if (quadratic) FrameQuadraticErrors(frame, active_pairs, kept_forms ? &*kept_forms : nullptr, kept, t, out);
+    if (quadratic) {
+      FrameQuadraticErrors(frame, active_pairs, kept_forms ? &*kept_forms : nullptr, kept_frame, kept, t, out);
+    }
     if (maximum) FrameBounds(frame, t, bounds);
     if (sampled && next_sample < sample_frames.size() && sample_frames[next_sample] == t) {
       FrameSampledErrors(frame, next_sample++, scratch, sums);
@@ -559,6 +564,7 @@ std::optional<PreparedMotion::Impl::KeptForms> PreparedMotion::Impl::MakeKeptFor
 void PreparedMotion::Impl::FrameQuadraticErrors(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame,
                                                 const std::vector<size_t>& active_pairs,
                                                 const KeptForms* kept_forms,
+                                                Eigen::Matrix<double, Eigen::Dynamic, 3>& x,
                                                 const std::vector<int>& kept, int t,
                                                 LevelErrors& out) const {
   // sum_kl tr(Delta_k^T C_kl Delta_l) over the joint pairs.
@@ -579,7 +585,6 @@ void PreparedMotion::Impl::FrameQuadraticErrors(const Eigen::Matrix<double, Eige
     // X_s^T with the root's translation taken out: rows 4s..4s+3 of frame t's columns.
     const int m = static_cast<int>(kept.size());
     const Eigen::RowVector3d root = kt.block<1, 3>(3, 3 * t);
-    Eigen::Matrix<double, Eigen::Dynamic, 3> x(4 * m, 3);
     for (int s = 0; s < m; ++s) {
       x.block<4, 3>(4 * s, 0) = kept_forms->solution->block<4, 3>(kept_forms->slot_row[s], 3 * t);
       x.row(4 * s + 3) -= root;
