@@ -6,17 +6,13 @@
 #include <numeric>
 #include <optional>
 
-#include <Eigen/Cholesky>
-#include <Eigen/SparseCholesky>
-#include <Eigen/SparseCore>
-
 #include "base/hash.h"
+#include "core/block_cholesky.h"
 #include "core/polar.h"
 
 namespace motionlod::core {
 
 using Eigen::MatrixXd;
-using SparseMatrixd = Eigen::SparseMatrix<double>;
 // Delta_k(t) in float for the per-vertex blends, as a 4x4 with a zero last row: four
 // aligned packets, so a blend and its transforms stay in registers (a 3x4 float matrix
 // straddles packets, and the compiler spills it to extract its columns).
@@ -69,13 +65,14 @@ struct PreparedMotion::Impl {
   int n = 0;
   int frames = 0;
   MatrixXd kt;                    // 4n x 3T: block (4k, 3t) = K_k(t)^T
-  SparseMatrixd cp, cn;           // 4n x 4n, area-fraction weighted moments
-  // The same moments as a list of joint pairs k <= l sharing vertices, for the per-frame
-  // quadratic forms of the errors (a contiguous loop beats a sparse product here).
+  // The area-fraction weighted moments per pair of joints k <= l sharing vertices: for the
+  // per-frame quadratic forms of the errors, with off-diagonal pairs doubled (they appear
+  // twice in the trace sum), and Q_kl = alpha Cp_kl + beta_fit Cn_kl for the normal
+  // equations, as they are.
   std::vector<std::pair<int, int>> pairs;
   std::vector<Eigen::Matrix4d> pair_cp;
   std::vector<Eigen::Matrix3d> pair_cn;
-  SparseMatrixd q_fit;            // alpha Cp + beta_fit Cn
+  std::vector<Eigen::Matrix4d> pair_fit;
   // For the quadratic forms in the kept joints' space (see KeptForms; Workload::kEveryLevel
   // only, empty otherwise): with every frame's matrices shifted by the root's translation
   // r(t), Kr_k(t) = K_k(t) - [0 | r(t)], the products Fp = Cp Kr and Fn = Cn Kr (4n x 3T,
@@ -83,8 +80,8 @@ struct PreparedMotion::Impl {
   // tr(Kr^T Cn Kr) per frame.
   MatrixXd fp_root, fn_root;
   std::vector<double> const_p, const_n;
-  // The right-hand sides are assembled transposed (3T x 4m, see SolveSpd)
-  // from transposed copies: ft = (q_fit * kt)^T and ktt = kt^T, both 3T x 4n.
+  // The right-hand sides are assembled transposed (3T x 4m, see SolveSystem)
+  // from transposed copies: ft = (Q kt)^T and ktt = kt^T, both 3T x 4n.
   MatrixXd ft, ktt;
   std::vector<Eigen::Vector4d> joint_point;      // [p0_j; 1]
   std::vector<Eigen::Vector4d> joint_axis;       // [o0_j; 0], the bind y axis
@@ -274,33 +271,11 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
     for (int k = 0; k < n; ++k) d.kt.block<4, 3>(4 * k, 3 * t) = skinning[static_cast<size_t>(t) * n + k].transpose();
   }
 
-  // The character's pair moments as sparse 4n x 4n matrices (both triangles) for the
-  // right-hand sides, and as a list with off-diagonal pairs doubled for the error forms.
-  {
-    std::vector<Eigen::Triplet<double>> cp_triplets, cn_triplets;
-    for (const Character::JointPairMoment& moment : c.joint_pair_moments()) {
-      for (int r = 0; r < 4; ++r) {
-        for (int q = 0; q < 4; ++q) {
-          const double vp = moment.position_moment(r, q);
-          const double vn = r < 3 && q < 3 ? moment.normal_moment(r, q) : 0.0;
-          cp_triplets.emplace_back(4 * moment.k + r, 4 * moment.l + q, vp);
-          if (vn != 0) cn_triplets.emplace_back(4 * moment.k + r, 4 * moment.l + q, vn);
-          if (moment.k != moment.l) {
-            cp_triplets.emplace_back(4 * moment.l + q, 4 * moment.k + r, vp);
-            if (vn != 0) cn_triplets.emplace_back(4 * moment.l + q, 4 * moment.k + r, vn);
-          }
-        }
-      }
-      // Off-diagonal pairs appear twice in the trace sum: fold the factor 2 in here.
-      const double factor = moment.k == moment.l ? 1.0 : 2.0;
-      d.pairs.emplace_back(moment.k, moment.l);
-      d.pair_cp.push_back(factor * moment.position_moment);
-      d.pair_cn.push_back(factor * moment.normal_moment);
-    }
-    d.cp.resize(4 * n, 4 * n);
-    d.cp.setFromTriplets(cp_triplets.begin(), cp_triplets.end());
-    d.cn.resize(4 * n, 4 * n);
-    d.cn.setFromTriplets(cn_triplets.begin(), cn_triplets.end());
+  for (const Character::JointPairMoment& moment : c.joint_pair_moments()) {
+    const double factor = moment.k == moment.l ? 1.0 : 2.0;
+    d.pairs.emplace_back(moment.k, moment.l);
+    d.pair_cp.push_back(factor * moment.position_moment);
+    d.pair_cn.push_back(factor * moment.normal_moment);
   }
 
   const std::vector<double>& lengths = c.subtree_lengths();
@@ -365,15 +340,24 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
       }
     }
   }
-  d.q_fit = d.alpha * d.cp + d.beta_fit * d.cn;
+  d.pair_fit.reserve(d.pairs.size());
+  for (const Character::JointPairMoment& moment : c.joint_pair_moments()) {
+    Eigen::Matrix4d q = d.alpha * moment.position_moment;
+    q.topLeftCorner<3, 3>() += d.beta_fit * moment.normal_moment;
+    d.pair_fit.push_back(q);
+  }
   d.ktt = d.kt.transpose();
-  // F^T = Kt^T Q (Q is symmetric): each nonzero of Q adds one contiguous column of all
-  // frames, where the sparse-dense product Q Kt updates one coefficient at a time (about
-  // ten times the instructions; the same products summed in the same order).
+  // F^T = Kt^T Q, one pair at a time: F_k += Q_kl Kt_l and F_l += Q_kl^T Kt_k, each a
+  // product of 4 contiguous columns of all frames (a sparse-dense product would update
+  // one coefficient at a time).
   d.ft = MatrixXd::Zero(3 * frames, 4 * n);
-  for (int col = 0; col < d.q_fit.outerSize(); ++col) {
-    for (SparseMatrixd::InnerIterator it(d.q_fit, col); it; ++it) {
-      d.ft.col(col).noalias() += it.value() * d.ktt.col(it.row());
+  const Eigen::Index ft_stride = d.ft.rows();
+  for (size_t q = 0; q < d.pairs.size(); ++q) {
+    const auto [k, l] = d.pairs[q];
+    AddPanelProduct<4>(d.ft.col(4 * k).data(), d.ktt.col(4 * l).data(), d.pair_fit[q], ft_stride, ft_stride);
+    if (k != l) {
+      AddPanelProduct<4>(d.ft.col(4 * l).data(), d.ktt.col(4 * k).data(), d.pair_fit[q].transpose(),
+                         ft_stride, ft_stride);
     }
   }
   d.joint_fit.resize(n);
@@ -811,63 +795,13 @@ void PreparedMotion::Impl::FrameSampledErrors(const Eigen::Matrix<double, Eigen:
 
 namespace {
 
-// The normal equations of one level: G (4m x 4m, lambda included), B (4m x 3T) and
-// their solution X. B is kept transposed (see SolveSpd).
+// The normal equations of one level: G (4m x 4m, lambda included, in 4x4 blocks), B
+// (4m x 3T) and their solution X. B is kept transposed (3T x 4m: 4 contiguous columns of
+// all frames per kept joint), the layout BlockCholesky::SolveTransposed works in.
 struct LevelSystem {
-  MatrixXd g, bt, x;
+  BlockSymmetric<4> g;
+  MatrixXd bt, x;
 };
-
-// Solves A X = B for a sparse symmetric positive definite A (dim x dim) and many
-// right-hand sides given transposed, bt = B^T (cols x dim); returns X (dim x cols).
-// Eigen's SimplicialLLT::solve walks the factor once per right-hand side with scalar
-// updates; here each entry of the factor updates a whole column of a block of B^T's rows
-// at once (contiguous, vectorised), the same arithmetic in another order. The blocks'
-// columns stay in the L1 cache (a long motion's whole columns, 3T doubles each, would
-// stream every update from L3), and each block goes from B^T to X in one pass.
-StatusOr<MatrixXd> SolveSpd(const SparseMatrixd& a, const MatrixXd& bt) {
-  const Eigen::SimplicialLLT<SparseMatrixd, Eigen::Lower, Eigen::AMDOrdering<int>> llt(a);
-  if (llt.info() != Eigen::Success) {
-    return Status(StatusCode::kInternal, "SolveLevel: a normal matrix is not positive definite");
-  }
-  const int dim = static_cast<int>(a.rows());
-  const Eigen::Index cols = bt.rows();
-  // y = P b: row i of b goes to row indices(i) of y; x = P^-1 w: row i of x is row
-  // indices(i) of w.
-  const auto& permutation = llt.permutationP().indices();
-  // L is stored column-major in the lower triangle with its diagonal.
-  const SparseMatrixd& l = llt.matrixL().nestedExpression();
-  std::vector<double> diagonal(dim);
-  for (int j = 0; j < dim; ++j) {
-    for (SparseMatrixd::InnerIterator it(l, j); it; ++it) {
-      if (it.row() == j) diagonal[j] = it.value();
-    }
-  }
-  constexpr Eigen::Index kBlockRows = 512;
-  MatrixXd x(dim, cols);
-  MatrixXd yt(std::min(kBlockRows, cols), dim);
-  for (Eigen::Index first = 0; first < cols; first += kBlockRows) {
-    const Eigen::Index rows = std::min(kBlockRows, cols - first);
-    auto block = yt.topRows(rows);
-    for (int i = 0; i < dim; ++i) block.col(permutation[i]) = bt.col(i).segment(first, rows);
-    for (int j = 0; j < dim; ++j) {  // L z = y
-      block.col(j) /= diagonal[j];
-      for (SparseMatrixd::InnerIterator it(l, j); it; ++it) {
-        if (it.row() > j) block.col(it.row()) -= it.value() * block.col(j);
-      }
-    }
-    for (int j = dim - 1; j >= 0; --j) {  // L^T w = z
-      for (SparseMatrixd::InnerIterator it(l, j); it; ++it) {
-        if (it.row() > j) block.col(j) -= it.value() * block.col(it.row());
-      }
-      block.col(j) /= diagonal[j];
-    }
-    for (Eigen::Index r = 0; r < rows; ++r) {
-      double* column = x.col(first + r).data();
-      for (int i = 0; i < dim; ++i) column[i] = block(r, permutation[i]);
-    }
-  }
-  return x;
-}
 
 Status ValidateLevel(const ReducedSkeleton& level, int n) {
   const int m = level.kept_count();
@@ -915,19 +849,20 @@ StatusOr<LevelSystem> SolveSystem(const PreparedMotion::Impl& d, const ReducedSk
   LevelSystem system;
 
   // G = P Q P^T + S J S^T + lambda I.
-  MatrixXd& g = system.g;
-  g = MatrixXd::Zero(dim, dim);
-  for (int col = 0; col < d.q_fit.outerSize(); ++col) {
-    const int gc = 4 * phi[col / 4] + col % 4;
-    for (SparseMatrixd::InnerIterator it(d.q_fit, col); it; ++it) {
-      const int row = static_cast<int>(it.row());
-      g(4 * phi[row / 4] + row % 4, gc) += it.value();
+  BlockSymmetric<4>& g = system.g;
+  g = BlockSymmetric<4>(m);
+  for (size_t q = 0; q < d.pairs.size(); ++q) {
+    const auto [k, l] = d.pairs[q];
+    if (k == l) {
+      g.AddDiagonal(phi[k], d.pair_fit[q]);
+    } else {
+      g.AddPair(phi[k], phi[l], d.pair_fit[q]);
     }
   }
-  for (int s = 0; s < m; ++s) g.block<4, 4>(4 * s, 4 * s) += d.joint_fit[level.kept_joints[s]];
-  const double trace = g.trace();
+  for (int s = 0; s < m; ++s) g.AddDiagonal(s, d.joint_fit[level.kept_joints[s]]);
+  const double trace = g.Trace();
   const double lambda = d.settings.regularization * (trace > 0 ? trace / dim : 1.0);
-  g.diagonal().array() += lambda;
+  g.AddIdentity(lambda);
 
   // B^T = (P F + S (J + lambda I) Kt)^T.
   MatrixXd& bt = system.bt;
@@ -945,12 +880,12 @@ StatusOr<LevelSystem> SolveSystem(const PreparedMotion::Impl& d, const ReducedSk
     system.x = d.kt;
     return system;
   }
-  // G is block-sparse (kept joints that share vertices) and nearly a tree: a sparse
-  // Cholesky with a fill-reducing ordering solves the 3T right-hand sides in time nearly
-  // linear in m instead of quadratic.
-  auto x = SolveSpd(g.sparseView(), bt);
-  if (!x.ok()) return x.status();
-  system.x = *std::move(x);
+  // G is block-sparse (kept joints that share vertices) and nearly a tree: its block
+  // Cholesky factor solves the 3T right-hand sides in time nearly linear in m instead of
+  // quadratic.
+  auto factor = BlockCholesky<4>::Factor(g);
+  if (!factor.ok()) return factor.status();
+  system.x = factor->SolveTransposed(bt);
   return system;
 }
 
@@ -985,7 +920,7 @@ StatusOr<VariantSolution> SolveVariant(const PreparedMotion::Impl& d, const Redu
   const int n = d.n;
   const int m = level.kept_count();
   const int cols = 3 * d.frames;
-  const MatrixXd& g = system->g;
+  const BlockSymmetric<4>& g = system->g;
   const MatrixXd& bt = system->bt;
   MatrixXd& x = system->x;
 
@@ -1005,10 +940,9 @@ StatusOr<VariantSolution> SolveVariant(const PreparedMotion::Impl& d, const Redu
     }
     if (d.settings.resolve_rigid_translation) {
       // x_T = G_TT^-1 (b_T - G_TN x_N): translations are rows 4s+3, the rest is fixed.
-      // The right-hand sides transposed, as SolveSpd takes them: b_T^T - x_N^T G_TN^T.
-      // G_TT and G_TN keep G's block sparsity: G_TT is factored sparse, and each nonzero
-      // of G_TN subtracts one contiguous column of all frames (as for F in Create: a
-      // sparse-dense product updates one coefficient at a time).
+      // The right-hand sides transposed, as SolveTransposed takes them: b_T^T - x_N^T G_TN^T.
+      // G_TT and G_TN keep G's block sparsity: G_TT is a block matrix of 1x1 blocks, and
+      // each coefficient of G_TN subtracts one contiguous column of all frames.
       // Transposed copies are made column by column of x: reading a row of x would touch
       // one cache line per column, every line of a long motion's x for each row.
       MatrixXd x_nt(cols, 3 * m);
@@ -1017,24 +951,26 @@ StatusOr<VariantSolution> SolveVariant(const PreparedMotion::Impl& d, const Redu
           for (int r = 0; r < 3; ++r) x_nt(col, 3 * s + r) = x(4 * s + r, col);
         }
       }
-      std::vector<Eigen::Triplet<double>> tt;
+      BlockSymmetric<1> g_tt(m);
       MatrixXd x_tt(cols, m);
+      const auto subtract_g_tn = [&](int s, int u, const Eigen::Matrix4d& g_su) {
+        for (int r = 0; r < 3; ++r) x_tt.col(s).noalias() -= g_su(3, r) * x_nt.col(3 * u + r);
+      };
       for (int s = 0; s < m; ++s) {
         x_tt.col(s) = bt.col(4 * s + 3);
-        for (int u = 0; u < m; ++u) {
-          if (g(4 * s + 3, 4 * u + 3) != 0) tt.emplace_back(s, u, g(4 * s + 3, 4 * u + 3));
-          for (int r = 0; r < 3; ++r) {
-            const double g_tn = g(4 * s + 3, 4 * u + r);
-            if (g_tn != 0) x_tt.col(s).noalias() -= g_tn * x_nt.col(3 * u + r);
-          }
-        }
+        g_tt.AddDiagonal(s, g.diagonal(s).bottomRightCorner<1, 1>());
+        subtract_g_tn(s, s, g.diagonal(s));
       }
-      SparseMatrixd g_tt(m, m);
-      g_tt.setFromTriplets(tt.begin(), tt.end());
-      auto translations = SolveSpd(g_tt, x_tt);
-      if (!translations.ok()) return translations.status();
+      for (const auto& block : g.lower()) {  // G(row, col) and its transpose G(col, row)
+        g_tt.AddPair(block.row, block.col, block.value.bottomRightCorner<1, 1>());
+        subtract_g_tn(block.row, block.col, block.value);
+        subtract_g_tn(block.col, block.row, block.value.transpose());
+      }
+      auto factor = BlockCholesky<1>::Factor(g_tt);
+      if (!factor.ok()) return factor.status();
+      const MatrixXd translations = factor->SolveTransposed(x_tt);
       for (int col = 0; col < cols; ++col) {
-        for (int s = 0; s < m; ++s) x(4 * s + 3, col) = (*translations)(s, col);
+        for (int s = 0; s < m; ++s) x(4 * s + 3, col) = translations(s, col);
       }
     }
   }

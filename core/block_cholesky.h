@@ -1,0 +1,89 @@
+// Sparse symmetric positive definite systems made of B x B blocks, as the normal matrices
+// of the levels are (B = 4: one block per pair of kept joints sharing vertices; B = 1:
+// the translations of the rigid re-solve), and their Cholesky factors.
+//
+// Why not Eigen's SimplicialLLT: the systems are small (4m rows, m kept joints) and solved
+// for thousands of right-hand sides (3T, every frame's coordinates). A scalar sparse
+// factor spends its time on the fill-reducing ordering, the symbolic analysis and
+// triplet assembly, then updates one right-hand-side column per nonzero; a block factor
+// needs no ordering search (see BlockCholesky) and updates B columns per block at once,
+// reading each panel of right-hand sides a quarter as often.
+#pragma once
+
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "base/status.h"
+
+namespace motionlod::core {
+
+using ::motionlod::Status;
+using ::motionlod::StatusOr;
+
+// Panels of B columns of `rows` doubles each, column c at column_stride * c from the
+// first: row i of panel_r gains M times row i of panel_q (the panels must not overlap).
+// The loop runs along the rows, so it vectorises over them.
+template <int B>
+void AddPanelProduct(double* panel_r, const double* panel_q, const Eigen::Matrix<double, B, B>& m,
+                     Eigen::Index rows, Eigen::Index column_stride);
+
+template <int B>
+class BlockSymmetric {
+ public:
+  using Block = Eigen::Matrix<double, B, B>;
+  // A block (row, col), row > col; block (col, row) is its transpose.
+  struct LowerBlock {
+    int row = 0, col = 0;
+    Block value;
+  };
+
+  explicit BlockSymmetric(int block_count = 0);
+  int block_count() const { return static_cast<int>(diagonal_.size()); }
+
+  // Adds v to block (s, u) and v^T to block (u, s): v + v^T where s == u.
+  void AddPair(int s, int u, const Block& v);
+  // Adds a symmetric v to the diagonal block s.
+  void AddDiagonal(int s, const Block& v);
+  // Adds lambda to every diagonal coefficient.
+  void AddIdentity(double lambda);
+  double Trace() const;
+
+  const Block& diagonal(int s) const { return diagonal_[s]; }
+  const std::vector<LowerBlock>& lower() const { return lower_; }
+
+ private:
+  Block& LowerAt(int row, int col);
+
+  std::vector<Block> diagonal_;
+  std::vector<LowerBlock> lower_;
+  std::vector<std::vector<int>> column_blocks_;  // per column: indices into lower_
+};
+
+// A = L L^T with A's blocks eliminated from the last to the first. For a skeleton's slots,
+// which are in topological order (parents first), that is leaves first: the normal
+// matrix of a tree (joints coupled to their parent only) then factors without fill, and
+// the couplings a vertex weighted to three or more joints adds fill only among their
+// ancestors, so no ordering search pays for itself.
+template <int B>
+class BlockCholesky {
+ public:
+  using Block = Eigen::Matrix<double, B, B>;
+
+  // Fails (kInternal) when A is not numerically positive definite.
+  static StatusOr<BlockCholesky> Factor(const BlockSymmetric<B>& a);
+
+  // X = A^-1 Y for the right-hand sides given transposed, bt = Y^T (cols x B blocks);
+  // returns X (B blocks x cols). The right-hand sides go through in row chunks whose
+  // panels stay in the L2 cache for the whole forward and backward pass.
+  Eigen::MatrixXd SolveTransposed(const Eigen::MatrixXd& bt) const;
+
+ private:
+  struct Column {
+    Block diagonal_inverse;  // L_qq^-1, lower triangular
+    std::vector<std::pair<int, Block>> below;  // (r, L_rq), r > q in elimination order
+  };
+  std::vector<Column> columns_;  // column q is block count - 1 - q of A
+};
+
+}  // namespace motionlod::core
