@@ -2,6 +2,8 @@
 // Frobenius norm, det(R) = +1 (a rotation, never a reflection).
 #pragma once
 
+#include <span>
+
 #include <Eigen/Core>
 
 namespace motionlod::core {
@@ -11,6 +13,13 @@ namespace motionlod::core {
 // near-rotation needs two or three 3x3 products. SVD with a reflection guard otherwise
 // (det(A) <= 0 or nearly singular A). Returns the identity for A = 0.
 Eigen::Matrix3d NearestRotation(const Eigen::Matrix3d& a);
+
+// NearestRotation of each matrix, in place, several at a time: the Newton-Schulz steps of
+// eight matrices interleave in one vectorised loop instead of waiting on each other's
+// latency (the rigid variants project m x T matrices per level). A matrix that needs
+// scaled Newton or the SVD takes NearestRotation's path alone. Agrees with
+// NearestRotation to rounding: a batch steps until all of its matrices have converged.
+void NearestRotations(std::span<Eigen::Matrix3d> matrices);
 
 // The SVD path alone: R = U diag(1, 1, det(U V^T)) V^T. The reference for tests.
 Eigen::Matrix3d NearestRotationSvd(const Eigen::Matrix3d& a);

@@ -932,11 +932,14 @@ StatusOr<VariantSolution> SolveVariant(const PreparedMotion::Impl& d, const Redu
   // The full level's solution is the original matrices themselves (SolveSystem).
   const bool unchanged = m == n && !projected;
   if (projected) {
+    // x holds each K'^T: the polar factor of a transpose is the transpose of the factor.
+    std::vector<Eigen::Matrix3d> rotations(static_cast<size_t>(d.frames) * m);
     for (int t = 0; t < d.frames; ++t) {
-      for (int s = 0; s < m; ++s) {
-        const Eigen::Matrix3d a = x.block<3, 3>(4 * s, 3 * t).transpose();
-        x.block<3, 3>(4 * s, 3 * t) = NearestRotation(a).transpose();
-      }
+      for (int s = 0; s < m; ++s) rotations[static_cast<size_t>(t) * m + s] = x.block<3, 3>(4 * s, 3 * t);
+    }
+    NearestRotations(rotations);
+    for (int t = 0; t < d.frames; ++t) {
+      for (int s = 0; s < m; ++s) x.block<3, 3>(4 * s, 3 * t) = rotations[static_cast<size_t>(t) * m + s];
     }
     if (d.settings.resolve_rigid_translation) {
       // x_T = G_TT^-1 (b_T - G_TN x_N): translations are rows 4s+3, the rest is fixed.

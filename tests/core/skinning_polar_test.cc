@@ -62,6 +62,32 @@ TEST(NearestRotation, NewtonMatchesSvdAndIsARotation) {
   }
 }
 
+TEST(NearestRotation, BatchesAgreeWithOneAtATime) {
+  // Near-rotations (the common case), general matrices (scaled Newton first), reflections,
+  // zero and singular ones in one list whose length is not a multiple of the batch.
+  std::mt19937 rng(11);
+  std::normal_distribution<double> noise(0, 1);
+  std::vector<Eigen::Matrix3d> matrices;
+  for (int q = 0; q < 45; ++q) {
+    Eigen::Matrix3d a;
+    for (int c = 0; c < 9; ++c) a(c / 3, c % 3) = noise(rng);
+    const Eigen::Matrix3d rotation = Eigen::AngleAxisd(noise(rng), Vec3d(noise(rng), 1, noise(rng)).normalized())
+                                         .toRotationMatrix();
+    matrices.push_back(q % 3 == 0 ? a : 2.5 * rotation + 0.05 * a);
+  }
+  matrices[7] = Eigen::Vector3d(1, 1, -1).asDiagonal();
+  matrices[20] = Eigen::Matrix3d::Zero();
+  matrices[33] = Eigen::Vector3d(1, 1, 0).asDiagonal();
+  std::vector<Eigen::Matrix3d> batched = matrices;
+  NearestRotations(batched);
+  for (size_t q = 0; q < matrices.size(); ++q) {
+    const Eigen::Matrix3d expected = NearestRotation(matrices[q]);
+    EXPECT_LE((batched[q] - expected).norm(), 1e-12) << q << "\n" << matrices[q];
+    EXPECT_NEAR((batched[q].transpose() * batched[q] - Eigen::Matrix3d::Identity()).norm(), 0, 1e-12) << q;
+    EXPECT_NEAR(batched[q].determinant(), 1.0, 1e-12) << q;
+  }
+}
+
 TEST(NearestRotation, HandlesReflectionsScaleAndZero) {
   const Eigen::Matrix3d mirror = Eigen::Vector3d(1, 1, -1).asDiagonal();
   EXPECT_NEAR(NearestRotation(mirror).determinant(), 1.0, 1e-12);

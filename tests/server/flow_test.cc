@@ -216,7 +216,7 @@ TEST(DaemonFlow, ProgressStreamsAsServerSentEvents) {
   // Long enough to report progress on the way.
   auto submitted = SubmitBake(
       *client,
-      {{"character", kSampleId}, {"motion", "Jump_Full_Long"}, {"all_levels", true}, {"fps", 240}});
+      {{"character", kSampleId}, {"motion", "Jump_Full_Long"}, {"all_levels", true}, {"fps", 600}});
   ASSERT_TRUE(submitted);
   ASSERT_EQ(submitted->status, 202) << submitted->body;
   const std::string id = Json(submitted)["id"];
