@@ -276,11 +276,11 @@ std::string CheckMatrices(size_t l, uint32_t frame_count, size_t m, bool rigid,
     }
   }
   if (rigid) {
-    constexpr double kTolerance = 1e-3;
-    for (size_t matrix = 0; matrix < matrices.size() / kMatrixFloats; ++matrix) {
-      const float* k = matrices.data() + matrix * kMatrixFloats;
+    // Branch-free over every matrix as above (a branch per matrix costs a rigid
+    // every-level bake 3% of its time); the culprit is located only on failure.
+    const auto is_rotation = [](const float* k) {
+      constexpr double kTolerance = 1e-3;
       // Columns of A: (k[c], k[4 + c], k[8 + c]).
-      double det = 0;
       bool orthonormal = true;
       for (int a = 0; a < 3; ++a) {
         for (int b = a; b < 3; ++b) {
@@ -289,10 +289,18 @@ std::string CheckMatrices(size_t l, uint32_t frame_count, size_t m, bool rigid,
           orthonormal &= std::abs(dot - (a == b ? 1.0 : 0.0)) <= kTolerance;
         }
       }
-      det = double{k[0]} * (double{k[5]} * k[10] - double{k[6]} * k[9]) -
-            double{k[1]} * (double{k[4]} * k[10] - double{k[6]} * k[8]) +
-            double{k[2]} * (double{k[4]} * k[9] - double{k[5]} * k[8]);
-      if (!orthonormal || !(det > 0)) {
+      const double det = double{k[0]} * (double{k[5]} * k[10] - double{k[6]} * k[9]) -
+                         double{k[1]} * (double{k[4]} * k[10] - double{k[6]} * k[8]) +
+                         double{k[2]} * (double{k[4]} * k[9] - double{k[5]} * k[8]);
+      return orthonormal & (det > 0);
+    };
+    const size_t count = matrices.size() / kMatrixFloats;
+    bool all_rotations = true;
+    for (size_t matrix = 0; matrix < count; ++matrix) {
+      all_rotations &= is_rotation(matrices.data() + matrix * kMatrixFloats);
+    }
+    for (size_t matrix = 0; !all_rotations && matrix < count; ++matrix) {
+      if (!is_rotation(matrices.data() + matrix * kMatrixFloats)) {
         return StrCat("level ", l, ": K'(frame ", matrix / m, ", slot ", matrix % m,
                       ") is not a rotation plus translation, but the level set is flagged "
                       "rigid");
