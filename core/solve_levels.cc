@@ -691,6 +691,7 @@ void PreparedMotion::Impl::MaxVertexError(const DeltaView& delta, const MaxSearc
             [&](int a, int b) { return bounds.frame_bound[a] > bounds.frame_bound[b]; });
 
   double best = 0;
+  float best_squared = 0;  // the float |d_i|^2 whose root is `best`
   int best_frame = 0, best_vertex = 0;
   // Nothing at or below `floor` is refined: negligible, or within the decision's bound.
   const double floor = std::max(kNegligible * c.height(), std::isfinite(decide_within) ? decide_within : 0.0);
@@ -739,9 +740,13 @@ void PreparedMotion::Impl::MaxVertexError(const DeltaView& delta, const MaxSearc
             for (uint32_t g = skin.influence_offsets[i]; g < skin.influence_offsets[i + 1]; ++g) {
               blended.noalias() += skin.influence_weights[g] * frame_delta_f[skin.influence_joints[g]];
             }
-            const double length = (blended.leftCols<3>() * skin.positions[i] + blended.col(3)).norm();
-            if (length > best) {
-              best = length;
+            // Compared squared (sqrt is monotonic): the square root, its conversion and a
+            // compare with `best` in memory were a fifth of the search's time per vertex.
+            const float length_squared =
+                (blended.leftCols<3>() * skin.positions[i] + blended.col(3)).squaredNorm();
+            if (length_squared > best_squared) {
+              best_squared = length_squared;
+              best = std::sqrt(static_cast<double>(length_squared));
               best_frame = t;
               best_vertex = static_cast<int>(i);
               if (best > decide_within) return;
