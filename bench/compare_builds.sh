@@ -6,13 +6,14 @@
 # BASE_BUILD and NEW_BUILD hold bench/motionlod_bench_bake (MOTIONLOD_BUILD_BENCH=ON; e.g.
 # a `git worktree` of the base commit configured like build-bench/). FILTER is a Google
 # Benchmark regex over bake/ cases; the matching skin/ cases are added. ROUNDS (default
-# 2) and MIN_TIME (default 0.3 s) come from the environment.
+# 2), MIN_TIME (default 0.3 s) and THREADS (default 1) come from the environment.
 set -euo pipefail
 base=${1:?usage: compare_builds.sh BASE_BUILD NEW_BUILD [FILTER]}
 new=${2:?usage: compare_builds.sh BASE_BUILD NEW_BUILD [FILTER]}
 filter=${3:-'(09_11_cmu.fbx|stormtrooper.dae|Orc.gltf)/(vp|vpno\+pd)/default'}
 rounds=${ROUNDS:-2}
 min_time=${MIN_TIME:-0.3}
+threads=${THREADS:-1}
 here=$(cd "$(dirname "$0")/.." && pwd)
 data="$here/../shared/data"
 [ -d "$data" ] || { echo "compare_builds: no $data" >&2; exit 2; }
@@ -24,32 +25,32 @@ for build in "$base" "$new"; do
 done
 # The skinning passes of the files the filter names, e.g. skin/Orc.gltf/threads:1.
 cases=$(sed -E 's/^\(([^)]*)\)\/.*$/\1/; t; s/\/.*$//' <<<"$filter")
-full="bake/$filter/threads:1|skin/($cases)/threads:1"
+full="bake/$filter/threads:$threads|skin/($cases)/threads:$threads"
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 for ((round = 0; round < rounds; ++round)); do
   for side in base new; do
     build=$base
     [ "$side" = new ] && build=$new
-    "$build/bench/motionlod_bench_bake" --data="$data" --benchmark_filter="$full" \
+    "$build/bench/motionlod_bench_bake" --data="$data" --threads="$threads" --benchmark_filter="$full" \
       --benchmark_min_time="$min_time" --benchmark_repetitions=3 \
       --benchmark_report_aggregates_only=true --benchmark_format=json 2>/dev/null \
       >"$work/$side.$round.json"
   done
 done
-python3 - "$work" "$rounds" <<'EOF'
+python3 - "$work" "$rounds" "$threads" <<'EOF'
 import json, statistics, sys
-work, rounds = sys.argv[1], int(sys.argv[2])
+work, rounds, threads = sys.argv[1], int(sys.argv[2]), sys.argv[3]
 times = {}
 for side in ("base", "new"):
     for r in range(rounds):
         for b in json.load(open(f"{work}/{side}.{r}.json"))["benchmarks"]:
             if b.get("aggregate_name") != "median":
                 continue
-            name = b["run_name"].replace("/threads:1", "").replace("/manual_time", "")
+            name = b["run_name"].replace(f"/threads:{threads}", "").replace("/manual_time", "")
             scale = {"ns": 1e-6, "us": 1e-3, "ms": 1.0, "s": 1e3}[b["time_unit"]]
             times.setdefault((name, side), []).append(b["real_time"] * scale)
-print("| case (1 thread) | base ms (ratio) | new ms (ratio) | change |")
+print(f"| case ({threads} thread{'s' if threads != '1' else ''}) | base ms (ratio) | new ms (ratio) | change |")
 print("|---|---|---|---|")
 for name in sorted({n for n, _ in times if n.startswith("bake/")}):
     case = name.split("/")[1]

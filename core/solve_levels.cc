@@ -988,12 +988,19 @@ StatusOr<VariantSolution> SolveVariant(const PreparedMotion::Impl& d, const Redu
 }  // namespace
 
 StatusOr<LevelResult> PreparedMotion::SolveLevel(const ReducedSkeleton& level) const {
+  auto result = SolveOptimized(level);
+  if (!result.ok()) return result.status();
+  auto baseline = BaselineErrors(level);
+  if (!baseline.ok()) return baseline.status();
+  result->baseline = *std::move(baseline);
+  return result;
+}
+
+StatusOr<LevelResult> PreparedMotion::SolveOptimized(const ReducedSkeleton& level) const {
   const Impl& d = *impl_;
   auto solution = SolveVariant(d, level);
   if (!solution.ok()) return solution.status();
-  const int n = d.n;
   const int m = level.kept_count();
-  const std::vector<int>& phi = level.joint_to_slot;
   const MatrixXd& x = solution->x;
 
   LevelResult result;
@@ -1005,13 +1012,19 @@ StatusOr<LevelResult> PreparedMotion::SolveLevel(const ReducedSkeleton& level) c
           x.block<4, 3>(4 * s, 3 * t).transpose().cast<float>();
     }
   }
-
   d.EvaluateErrors(solution->Delta(d, level), level.kept_joints, Impl::Figures::kAll, result.optimized);
-  // The baseline: Delta_k = K_kept(phi(k)) - K_k.
-  Impl::DeltaView baseline{&d.kt, std::vector<int>(n), &d.kt};
-  for (int k = 0; k < n; ++k) baseline.solution_row[k] = 4 * level.kept_joints[phi[k]];
-  d.EvaluateErrors(baseline, level.kept_joints, Impl::Figures::kAll, result.baseline);
   return result;
+}
+
+StatusOr<LevelErrors> PreparedMotion::BaselineErrors(const ReducedSkeleton& level) const {
+  const Impl& d = *impl_;
+  if (Status status = ValidateLevel(level, d.n); !status.ok()) return status;
+  // Delta_k = K_kept(phi(k)) - K_k.
+  Impl::DeltaView baseline{&d.kt, std::vector<int>(d.n), &d.kt};
+  for (int k = 0; k < d.n; ++k) baseline.solution_row[k] = 4 * level.kept_joints[level.joint_to_slot[k]];
+  LevelErrors errors;
+  d.EvaluateErrors(baseline, level.kept_joints, Impl::Figures::kAll, errors);
+  return errors;
 }
 
 StatusOr<bool> PreparedMotion::MaxVertexErrorWithin(const ReducedSkeleton& level, double bound_pct) const {

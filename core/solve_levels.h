@@ -136,6 +136,11 @@ class PreparedMotion {
   // Solves one level with every figure, optimised and baseline. Allocates per level, never
   // per frame.
   StatusOr<LevelResult> SolveLevel(const ReducedSkeleton& level) const;
+  // SolveLevel in two independent halves, to run concurrently: the matrices with the
+  // optimised figures (LevelResult::baseline left empty), and the baseline's figures, which
+  // do not depend on the solution and cost about as much.
+  StatusOr<LevelResult> SolveOptimized(const ReducedSkeleton& level) const;
+  StatusOr<LevelErrors> BaselineErrors(const ReducedSkeleton& level) const;
 
   // Whether the level's optimised maximum vertex error (LevelErrors::max_vertex_error_pct)
   // is at most bound_pct > 0: what a search over levels needs, decided without finding the

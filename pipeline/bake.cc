@@ -29,34 +29,63 @@ bool Cancelled(const std::atomic<bool>* cancel) {
 
 Status CancelledStatus() { return Status(StatusCode::kNotFound, "the bake was cancelled"); }
 
-// Solves the given kept counts in parallel into `out`, keyed by count.
+// Solves the given kept counts in parallel into `out`, keyed by count: each level's
+// optimised half and its baseline are separate tasks (a ladder's few levels of unequal
+// cost then balance better over the threads). on_done(levels done) runs on the calling
+// thread as levels complete.
 Status SolveCounts(const core::PreparedMotion& prepared, const core::JointRanking& ranking,
                    const std::vector<int>& counts, int threads,
                    std::map<int, core::LevelResult>& out,
                    const std::function<void(int)>& on_done, const std::atomic<bool>* cancel) {
-  std::vector<std::optional<core::LevelResult>> results(counts.size());
-  std::vector<Status> errors(counts.size());
+  const size_t count = counts.size();
+  std::vector<std::optional<core::ReducedSkeleton>> levels(count);
+  std::vector<std::optional<core::LevelResult>> results(count);
+  std::vector<std::optional<core::LevelErrors>> baselines(count);
+  for (size_t index = 0; index < count; ++index) {
+    auto level = core::ReduceSkeletonToCount(prepared.character(), ranking, counts[index]);
+    if (!level.ok()) return level.status();
+    levels[index] = *std::move(level);
+  }
+  // Task 2i solves level i, task 2i + 1 evaluates its baseline.
+  std::vector<Status> errors(2 * count);
+  std::vector<std::atomic<int>> halves_done(count);
+  size_t reported = 0;
   ParallelFor(
-      static_cast<int>(counts.size()), threads,
-      [&](int index) {
+      static_cast<int>(2 * count), threads,
+      [&](int task) {
         if (Cancelled(cancel)) return;
-        auto level = core::ReduceSkeletonToCount(prepared.character(), ranking, counts[index]);
-        if (!level.ok()) {
-          errors[index] = level.status();
-          return;
+        const size_t index = static_cast<size_t>(task / 2);
+        if (task % 2 == 0) {
+          auto result = prepared.SolveOptimized(*levels[index]);
+          if (result.ok()) {
+            results[index] = *std::move(result);
+          } else {
+            errors[task] = result.status();
+          }
+        } else {
+          auto baseline = prepared.BaselineErrors(*levels[index]);
+          if (baseline.ok()) {
+            baselines[index] = *std::move(baseline);
+          } else {
+            errors[task] = baseline.status();
+          }
         }
-        auto result = prepared.SolveLevel(*level);
-        if (!result.ok()) {
-          errors[index] = result.status();
-          return;
-        }
-        results[index] = std::move(*result);
+        ++halves_done[index];
       },
-      on_done);
+      [&](int) {
+        size_t levels_done = 0;
+        for (const std::atomic<int>& halves : halves_done) levels_done += halves.load() == 2;
+        for (; reported < levels_done; ++reported) {
+          if (on_done) on_done(static_cast<int>(reported + 1));
+        }
+      });
   if (Cancelled(cancel)) return CancelledStatus();
-  for (size_t index = 0; index < counts.size(); ++index) {
-    if (!errors[index].ok()) return errors[index];
-    out.emplace(counts[index], std::move(*results[index]));
+  for (const Status& error : errors) {
+    if (!error.ok()) return error;
+  }
+  for (size_t index = 0; index < count; ++index) {
+    results[index]->baseline = *std::move(baselines[index]);
+    out.emplace(counts[index], *std::move(results[index]));
   }
   return Status::Ok();
 }
@@ -265,7 +294,7 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
     if (!solved.count(hi)) {
       counts.push_back(hi);
       std::sort(counts.begin(), counts.end(), std::greater<>());
-      if (Status status = SolveCounts(**prepared, *ranking, {hi}, 1, solved, on_level_done, cancel);
+      if (Status status = SolveCounts(**prepared, *ranking, {hi}, threads, solved, on_level_done, cancel);
           !status.ok()) {
         return status;
       }
