@@ -1,6 +1,7 @@
 #include "pipeline/bake.h"
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <map>
@@ -195,16 +196,37 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
   const int n = character.joint_count();
   const int threads = ResolveThreads(request.threads);
 
+  // The ranking and the prepared motion do not depend on each other: side by side, the
+  // ranking first (in that order on one thread). "prepare" is reported once the ranking is
+  // done.
   report_progress(0.02, "rank");
-  auto ranking = core::RankJointsJob{&character, &motion, request.locked_joints}.Run();
+  std::optional<StatusOr<core::JointRanking>> ranked;
+  std::optional<StatusOr<std::shared_ptr<const core::PreparedMotion>>> created;
+  std::atomic<bool> ranking_done{false};
+  bool prepare_reported = false;
+  ParallelFor(
+      2, threads,
+      [&](int task) {
+        if (task == 0) {
+          ranked = core::RankJointsJob{&character, &motion, request.locked_joints}.Run();
+          ranking_done = true;
+        } else {
+          created = core::PreparedMotion::Create(inputs->character, motion, request.settings,
+                                                 request.all_levels
+                                                     ? core::PreparedMotion::Workload::kEveryLevel
+                                                     : core::PreparedMotion::Workload::kSomeLevels);
+        }
+      },
+      [&](int) {
+        if (ranking_done && !prepare_reported) {
+          report_progress(0.05, "prepare");
+          prepare_reported = true;
+        }
+      });
+  const StatusOr<core::JointRanking>& ranking = *ranked;
   if (!ranking.ok()) return ranking.status();
   const int minimum = ranking->locked_count;
-
-  report_progress(0.05, "prepare");
-  auto prepared = core::PreparedMotion::Create(
-      inputs->character, motion, request.settings,
-      request.all_levels ? core::PreparedMotion::Workload::kEveryLevel
-                         : core::PreparedMotion::Workload::kSomeLevels);
+  const StatusOr<std::shared_ptr<const core::PreparedMotion>>& prepared = *created;
   if (!prepared.ok()) return prepared.status();
   if (Cancelled(cancel)) return CancelledStatus();
 
