@@ -126,25 +126,40 @@ StatusOr<BakeInputs> PrepareInputs(const BakeRequest& request) {
   BakeInputs inputs;
   const io::Asset& character_asset = *request.character;
   inputs.warnings = character_asset.warnings();
-  auto character = core::BuildCharacter(character_asset.character());
-  if (!character.ok()) return character.status();
-  inputs.character = *character;
-  if (request.motion) {
-    auto retargeted = io::RetargetAnimation(*request.motion, request.animation, request.fps,
-                                            character_asset.character());
-    if (!retargeted.ok()) return retargeted.status();
-    inputs.motion = std::move(retargeted->motion);
-    for (const std::string& name : retargeted->unmatched_target_joints) {
-      inputs.warnings.push_back("joint '" + name + "' has no match in the motion: it keeps its bind pose");
+  // The character and the motion are built side by side: the motion needs only the asset.
+  std::optional<StatusOr<std::shared_ptr<const core::Character>>> character;
+  Status motion_status;
+  std::vector<std::string> motion_warnings;
+  ParallelFor(2, ResolveThreads(request.threads), [&](int task) {
+    if (task == 0) {
+      character = core::BuildCharacter(character_asset.character());
+    } else if (request.motion) {
+      auto retargeted = io::RetargetAnimation(*request.motion, request.animation, request.fps,
+                                              character_asset.character());
+      if (!retargeted.ok()) {
+        motion_status = retargeted.status();
+        return;
+      }
+      inputs.motion = std::move(retargeted->motion);
+      for (const std::string& name : retargeted->unmatched_target_joints) {
+        motion_warnings.push_back("joint '" + name + "' has no match in the motion: it keeps its bind pose");
+      }
+      for (const std::string& name : retargeted->unmatched_source_joints) {
+        motion_warnings.push_back("the motion's joint '" + name + "' matches no joint of the character");
+      }
+    } else {
+      auto motion = character_asset.SampleAnimation(request.animation, request.fps);
+      if (!motion.ok()) {
+        motion_status = motion.status();
+        return;
+      }
+      inputs.motion = std::move(*motion);
     }
-    for (const std::string& name : retargeted->unmatched_source_joints) {
-      inputs.warnings.push_back("the motion's joint '" + name + "' matches no joint of the character");
-    }
-  } else {
-    auto motion = character_asset.SampleAnimation(request.animation, request.fps);
-    if (!motion.ok()) return motion.status();
-    inputs.motion = std::move(*motion);
-  }
+  });
+  if (!character->ok()) return character->status();
+  inputs.character = **character;
+  if (!motion_status.ok()) return motion_status;
+  inputs.warnings.insert(inputs.warnings.end(), motion_warnings.begin(), motion_warnings.end());
   if (Status status = core::ValidateMotion(inputs.motion, *inputs.character); !status.ok()) {
     return status;
   }
