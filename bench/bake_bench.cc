@@ -290,21 +290,7 @@ StatusOr<Stages> BakeEveryLevel(const core::RawCharacter& raw, const io::Asset& 
   data.joint_names = (*character)->skeleton().joint_names;
   data.parents.assign((*character)->skeleton().parents.begin(),
                       (*character)->skeleton().parents.end());
-  for (const auto& r : results) {
-    proto::LevelData level;
-    level.kept_joints.assign(r->skeleton.kept_joints.begin(), r->skeleton.kept_joints.end());
-    level.joint_map.assign(r->skeleton.joint_to_slot.begin(), r->skeleton.joint_to_slot.end());
-    level.figures = pipeline::LevelFiguresOf(r->optimized);
-    level.matrices.resize(r->matrices.size() * proto::kMatrixFloats);
-    for (size_t q = 0; q < r->matrices.size(); ++q) {
-      for (int row = 0; row < 3; ++row) {
-        for (int col = 0; col < 4; ++col) {
-          level.matrices[q * 12 + row * 4 + col] = r->matrices[q](row, col);
-        }
-      }
-    }
-    data.levels.push_back(std::move(level));
-  }
+  for (const auto& r : results) data.levels.push_back(pipeline::LevelDataOf(*r));
   auto encoded = proto::EncodeLevelSet(data);
   if (!encoded.ok()) return encoded.status();
   benchmark::DoNotOptimize(encoded->data());

@@ -378,21 +378,9 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
   data.settings_hash = request.settings.Hash();
   data.joint_names = character.skeleton().joint_names;
   data.parents.assign(character.skeleton().parents.begin(), character.skeleton().parents.end());
-  for (int count : counts) {
-    const core::LevelResult& r = solved.at(count);
-    proto::LevelData level;
-    level.kept_joints.assign(r.skeleton.kept_joints.begin(), r.skeleton.kept_joints.end());
-    level.joint_map.assign(r.skeleton.joint_to_slot.begin(), r.skeleton.joint_to_slot.end());
-    level.figures = LevelFiguresOf(r.optimized);
-    level.matrices.resize(r.matrices.size() * proto::kMatrixFloats);
-    for (size_t q = 0; q < r.matrices.size(); ++q) {
-      // Row-major 3x4: Eigen stores column-major, so copy element by element.
-      for (int row = 0; row < 3; ++row) {
-        for (int col = 0; col < 4; ++col) level.matrices[q * 12 + row * 4 + col] = r.matrices[q](row, col);
-      }
-    }
-    data.levels.push_back(std::move(level));
-  }
+  data.levels.resize(counts.size());
+  ParallelFor(static_cast<int>(counts.size()), threads,
+              [&](int index) { data.levels[index] = LevelDataOf(solved.at(counts[index])); });
   auto encoded = proto::EncodeLevelSet(data);
   if (!encoded.ok()) return encoded.status();
   const double bake_seconds = SecondsSince(start);

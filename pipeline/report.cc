@@ -36,15 +36,25 @@ json ErrorsJson(const core::LevelErrors& e) {
 
 }  // namespace
 
-proto::LevelFigures LevelFiguresOf(const core::LevelErrors& errors) {
-  proto::LevelFigures figures;
-  figures.max_vertex_error_pct = static_cast<float>(errors.max_vertex_error_pct);
-  figures.mean_vertex_error_pct = static_cast<float>(errors.mean_vertex_error_pct);
-  figures.mean_normal_error_deg = static_cast<float>(errors.mean_normal_error_deg);
-  figures.mean_E = static_cast<float>(errors.mean_e);
-  figures.max_px_for_1px_error =
+proto::LevelData LevelDataOf(const core::LevelResult& result) {
+  proto::LevelData level;
+  level.kept_joints.assign(result.skeleton.kept_joints.begin(), result.skeleton.kept_joints.end());
+  level.joint_map.assign(result.skeleton.joint_to_slot.begin(), result.skeleton.joint_to_slot.end());
+  const core::LevelErrors& errors = result.optimized;
+  level.figures.max_vertex_error_pct = static_cast<float>(errors.max_vertex_error_pct);
+  level.figures.mean_vertex_error_pct = static_cast<float>(errors.mean_vertex_error_pct);
+  level.figures.mean_normal_error_deg = static_cast<float>(errors.mean_normal_error_deg);
+  level.figures.mean_E = static_cast<float>(errors.mean_e);
+  level.figures.max_px_for_1px_error =
       static_cast<float>(core::MaxPixelHeightForBudget(errors.max_vertex_error_pct / 100.0, 1.0));
-  return figures;
+  level.matrices.resize(result.matrices.size() * proto::kMatrixFloats);
+  for (size_t q = 0; q < result.matrices.size(); ++q) {
+    // Row-major 3x4: Eigen stores column-major, so copy element by element.
+    for (int row = 0; row < 3; ++row) {
+      for (int col = 0; col < 4; ++col) level.matrices[q * 12 + row * 4 + col] = result.matrices[q](row, col);
+    }
+  }
+  return level;
 }
 
 json RankingTable(const core::Character& character, const core::JointRanking& ranking) {

@@ -45,8 +45,9 @@ struct ReportInputs {
   std::vector<std::string> warnings;
 };
 
-// The level-file figures of a level's optimised errors.
-proto::LevelFigures LevelFiguresOf(const core::LevelErrors& errors);
+// A solved level as the level file holds it: kept joints, joint map, the optimised
+// figures and the matrices row-major.
+proto::LevelData LevelDataOf(const core::LevelResult& result);
 
 nlohmann::json BuildReport(const ReportInputs& inputs);
 
