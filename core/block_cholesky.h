@@ -10,6 +10,7 @@
 // reading each panel of right-hand sides a quarter as often.
 #pragma once
 
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>

@@ -401,6 +401,13 @@ TEST_F(RealData, BakeWritesALevelSetThatDecodesToTheSolvedMatrices) {
   }
   EXPECT_FLOAT_EQ(stored.figures().max_vertex_error_pct,
                   static_cast<float>(level->optimized.max_vertex_error_pct));
+  // The bake solves a level's optimised half and its baseline as separate tasks on its
+  // threads: both land on that level.
+  const nlohmann::json& reported = report["levels"][1];
+  ASSERT_EQ(reported["joints"], 12);
+  EXPECT_EQ(reported["mean_E"].get<double>(), level->optimized.mean_e);
+  EXPECT_EQ(reported["baseline_mean_E"].get<double>(), level->baseline.mean_e);
+  EXPECT_EQ(reported["baseline_max_vertex_error_pct"].get<double>(), level->baseline.max_vertex_error_pct);
 }
 
 }  // namespace
