@@ -63,7 +63,7 @@
 #include "io/asset.h"
 #include "io/retarget.h"
 #include "pipeline/bake.h"
-#include "pipeline/parallel.h"
+#include "base/parallel.h"
 #include "pipeline/report.h"
 #include "proto/level_format.h"
 
@@ -259,7 +259,7 @@ StatusOr<Stages> BakeEveryLevel(const core::RawCharacter& raw, const io::Asset& 
   for (int count = n; count >= ranking->locked_count; --count) counts.push_back(count);
   std::vector<std::optional<core::LevelResult>> results(counts.size());
   std::vector<Status> errors(counts.size());
-  pipeline::ParallelFor(static_cast<int>(counts.size()), pipeline::ResolveThreads(threads),
+  ParallelFor(static_cast<int>(counts.size()), ResolveThreads(threads),
                         [&](int index) {
                           auto level = core::ReduceSkeletonToCount(**character, *ranking,
                                                                    counts[index]);

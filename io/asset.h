@@ -83,8 +83,9 @@ class Asset {
   // animation of that name: the message lists the available ones), InvalidArgument
   // (fps negative, not finite or above 1000, a result of more than 1e6 frames or 1e7
   // joint matrices, or a joint matrix that is singular or not finite), so that a
-  // returned motion always passes core::ValidateMotion.
-  StatusOr<core::Motion> SampleAnimation(std::string_view name, double fps) const;
+  // returned motion always passes core::ValidateMotion. The frames are split over
+  // `threads` threads; the motion does not depend on how many.
+  StatusOr<core::Motion> SampleAnimation(std::string_view name, double fps, int threads = 1) const;
 
   struct Impl;
 

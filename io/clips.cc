@@ -7,6 +7,7 @@
 #include <set>
 #include <utility>
 
+#include "base/parallel.h"
 #include "io/text.h"
 
 namespace motionlod::io {
@@ -338,19 +339,23 @@ void PoseSampler::Evaluate(const Clip* clip, double seconds, core::Affine34d* jo
 }
 
 core::Motion SampleClip(const Clip& clip, const std::vector<SceneNode>& nodes,
-                        const std::vector<int>& joint_nodes, double fps) {
+                        const std::vector<int>& joint_nodes, double fps, int threads) {
   core::Motion motion;
   motion.name = clip.info.name;
   motion.fps = fps;
   motion.frame_count = FrameCount(clip.info.duration_seconds, fps);
   motion.joint_count = static_cast<int>(joint_nodes.size());
   motion.joint_world.resize(static_cast<size_t>(motion.frame_count) * joint_nodes.size());
-  PoseSampler sampler(nodes, joint_nodes);
-  for (int t = 0; t < motion.frame_count; ++t) {
-    const double seconds = std::min(t / fps, clip.info.duration_seconds);
-    sampler.Evaluate(&clip, seconds,
-                     &motion.joint_world[static_cast<size_t>(t) * joint_nodes.size()]);
-  }
+  // Contiguous frame ranges, one sampler each.
+  const int workers = std::max(1, std::min(threads, motion.frame_count));
+  ParallelFor(workers, workers, [&](int w) {
+    PoseSampler sampler(nodes, joint_nodes);
+    const int end = static_cast<int>(static_cast<int64_t>(motion.frame_count) * (w + 1) / workers);
+    for (int t = static_cast<int>(static_cast<int64_t>(motion.frame_count) * w / workers); t < end; ++t) {
+      const double seconds = std::min(t / fps, clip.info.duration_seconds);
+      sampler.Evaluate(&clip, seconds, &motion.joint_world[static_cast<size_t>(t) * joint_nodes.size()]);
+    }
+  });
   return motion;
 }
 

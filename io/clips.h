@@ -65,8 +65,9 @@ class PoseSampler {
   const Clip* bound_clip_ = nullptr;
 };
 
-// Samples `clip` at `fps` (> 0) into a Motion over `joint_nodes`.
+// Samples `clip` at `fps` (> 0) into a Motion over `joint_nodes`, its frames split over
+// `threads` threads (each frame is sampled on its own: the result does not depend on it).
 core::Motion SampleClip(const Clip& clip, const std::vector<SceneNode>& nodes,
-                        const std::vector<int>& joint_nodes, double fps);
+                        const std::vector<int>& joint_nodes, double fps, int threads);
 
 }  // namespace motionlod::io

@@ -204,8 +204,9 @@ StatusOr<RetargetedMotion> RetargetMotion(const core::RawSkeleton& source,
 }
 
 StatusOr<RetargetedMotion> RetargetAnimation(const Asset& source, std::string_view animation,
-                                             double fps, const core::RawCharacter& target) {
-  StatusOr<core::Motion> motion = source.SampleAnimation(animation, fps);
+                                             double fps, const core::RawCharacter& target,
+                                             int threads) {
+  StatusOr<core::Motion> motion = source.SampleAnimation(animation, fps, threads);
   if (!motion.ok()) return motion.status();
   return RetargetMotion(source.character().skeleton, *motion, target.skeleton);
 }

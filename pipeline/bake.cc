@@ -11,7 +11,7 @@
 #include "core/reduce_skeleton.h"
 #include "core/skinning.h"
 #include "io/retarget.h"
-#include "pipeline/parallel.h"
+#include "base/parallel.h"
 #include "pipeline/report.h"
 #include "proto/level_format.h"
 
@@ -130,12 +130,13 @@ StatusOr<BakeInputs> PrepareInputs(const BakeRequest& request) {
   std::optional<StatusOr<std::shared_ptr<const core::Character>>> character;
   Status motion_status;
   std::vector<std::string> motion_warnings;
-  ParallelFor(2, ResolveThreads(request.threads), [&](int task) {
+  const int threads = ResolveThreads(request.threads);
+  ParallelFor(2, threads, [&](int task) {
     if (task == 0) {
       character = core::BuildCharacter(character_asset.character());
     } else if (request.motion) {
       auto retargeted = io::RetargetAnimation(*request.motion, request.animation, request.fps,
-                                              character_asset.character());
+                                              character_asset.character(), threads);
       if (!retargeted.ok()) {
         motion_status = retargeted.status();
         return;
@@ -148,7 +149,7 @@ StatusOr<BakeInputs> PrepareInputs(const BakeRequest& request) {
         motion_warnings.push_back("the motion's joint '" + name + "' matches no joint of the character");
       }
     } else {
-      auto motion = character_asset.SampleAnimation(request.animation, request.fps);
+      auto motion = character_asset.SampleAnimation(request.animation, request.fps, threads);
       if (!motion.ok()) {
         motion_status = motion.status();
         return;

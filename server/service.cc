@@ -15,7 +15,7 @@
 #include "io/retarget.h"
 #include "io/sha256.h"
 #include "pipeline/export.h"
-#include "pipeline/parallel.h"
+#include "base/parallel.h"
 #include "proto/level_format.h"
 
 namespace motionlod::server {
@@ -296,7 +296,7 @@ Status Service::Start() {
       board_[id] = std::move(live);
     }
   }
-  const int workers = config_.threads > 0 ? config_.threads : pipeline::ResolveThreads(0);
+  const int workers = config_.threads > 0 ? config_.threads : ResolveThreads(0);
   queue_ = std::make_unique<JobQueue>(
       static_cast<size_t>(config_.queue_capacity), workers, [this](const std::string& id) {
         try {
@@ -319,7 +319,7 @@ Status Service::Start() {
   for (const std::string& id : *unfinished) queue_->Push(id, /*force=*/true);
   if (!unfinished->empty()) spdlog::info("requeued {} unfinished jobs", unfinished->size());
   spdlog::info("{} bake workers, {} threads per bake, queue capacity {}", workers,
-               config_.bake_threads == 0 ? pipeline::ResolveThreads(0) : config_.bake_threads,
+               config_.bake_threads == 0 ? ResolveThreads(0) : config_.bake_threads,
                config_.queue_capacity);
   return Status::Ok();
 }

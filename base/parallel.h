@@ -1,5 +1,6 @@
-// A minimal fork-join loop for the pipeline: runs fn(index) for every index in
-// [0, count) on `threads` threads and lets the calling thread observe completions.
+// A minimal fork-join loop for the layers above the core (which starts no thread): runs
+// fn(index) for every index in [0, count) on `threads` threads and lets the calling
+// thread observe completions.
 #pragma once
 
 #include <atomic>
@@ -9,7 +10,7 @@
 #include <thread>
 #include <vector>
 
-namespace motionlod::pipeline {
+namespace motionlod {
 
 inline int ResolveThreads(int threads) {
   if (threads > 0) return threads;
@@ -22,6 +23,13 @@ inline int ResolveThreads(int threads) {
 inline void ParallelFor(int count, int threads, const std::function<void(int)>& fn,
                         const std::function<void(int)>& on_done = {}) {
   if (count <= 0) return;
+  if (threads <= 1 || count == 1) {  // on the calling thread: no thread to start
+    for (int index = 0; index < count; ++index) {
+      fn(index);
+      if (on_done) on_done(index + 1);
+    }
+    return;
+  }
   std::atomic<int> next{0};
   std::mutex mutex;
   std::condition_variable changed;
@@ -58,4 +66,4 @@ inline void ParallelFor(int count, int threads, const std::function<void(int)>& 
   for (std::thread& t : pool) t.join();
 }
 
-}  // namespace motionlod::pipeline
+}  // namespace motionlod
