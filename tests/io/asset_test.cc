@@ -176,6 +176,22 @@ TEST(SampleAnimation, ResamplesAtTheRequestedRate) {
   }
 }
 
+TEST(SampleAnimation, ThreadsSplitTheFramesWithoutChangingThem) {
+  MOTIONLOD_REQUIRE_DATA();
+  for (const char* file : {"motions/cmu_131_01.bvh", "characters/RobotExpressive.glb"}) {
+    const auto asset = DataAsset(file);
+    const core::Motion one = *asset->SampleAnimation("", 0, 1);
+    for (int threads : {2, 3, 7}) {
+      const core::Motion split = *asset->SampleAnimation("", 0, threads);
+      ASSERT_EQ(split.frame_count, one.frame_count) << file;
+      ASSERT_EQ(split.joint_world.size(), one.joint_world.size()) << file;
+      for (size_t q = 0; q < one.joint_world.size(); ++q) {
+        ASSERT_EQ(split.joint_world[q], one.joint_world[q]) << file << " " << threads << " matrix " << q;
+      }
+    }
+  }
+}
+
 TEST(SampleAnimation, EveryClipOfEveryFileValidatesAgainstItsCharacter) {
   MOTIONLOD_REQUIRE_DATA();
   for (const ManifestFile& f : kManifest) {
