@@ -39,14 +39,14 @@ Status SolveCounts(const core::PreparedMotion& prepared, const core::JointRankin
                    std::map<int, core::LevelResult>& out,
                    const std::function<void(int)>& on_done, const std::atomic<bool>* cancel) {
   const size_t count = counts.size();
-  std::vector<std::optional<core::ReducedSkeleton>> levels(count);
+  std::vector<core::ReducedSkeleton> levels;
+  for (int kept : counts) {
+    auto level = core::ReduceSkeletonToCount(prepared.character(), ranking, kept);
+    if (!level.ok()) return level.status();
+    levels.push_back(*std::move(level));
+  }
   std::vector<std::optional<core::LevelResult>> results(count);
   std::vector<std::optional<core::LevelErrors>> baselines(count);
-  for (size_t index = 0; index < count; ++index) {
-    auto level = core::ReduceSkeletonToCount(prepared.character(), ranking, counts[index]);
-    if (!level.ok()) return level.status();
-    levels[index] = *std::move(level);
-  }
   // Task 2i solves level i, task 2i + 1 evaluates its baseline.
   std::vector<Status> errors(2 * count);
   std::vector<std::atomic<int>> halves_done(count);
@@ -57,14 +57,14 @@ Status SolveCounts(const core::PreparedMotion& prepared, const core::JointRankin
         if (Cancelled(cancel)) return;
         const size_t index = static_cast<size_t>(task / 2);
         if (task % 2 == 0) {
-          auto result = prepared.SolveOptimized(*levels[index]);
+          auto result = prepared.SolveOptimized(levels[index]);
           if (result.ok()) {
             results[index] = *std::move(result);
           } else {
             errors[task] = result.status();
           }
         } else {
-          auto baseline = prepared.BaselineErrors(*levels[index]);
+          auto baseline = prepared.BaselineErrors(levels[index]);
           if (baseline.ok()) {
             baselines[index] = *std::move(baseline);
           } else {
