@@ -53,6 +53,7 @@
 #include <string_view>
 #include <vector>
 
+#include "base/allocator.h"
 #include "bench/subdivide.h"
 #include "core/character.h"
 #include "core/motion.h"
@@ -769,4 +770,8 @@ int Main(int argc, char** argv) {
 }  // namespace
 }  // namespace motionlod::bench
 
-int main(int argc, char** argv) { return motionlod::bench::Main(argc, argv); }
+// Bakes run with the allocator settings of the programs that bake (base/allocator.h).
+int main(int argc, char** argv) {
+  motionlod::KeepFreedBlocksForReuse();
+  return motionlod::bench::Main(argc, argv);
+}

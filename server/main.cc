@@ -18,6 +18,7 @@
 #include <sstream>
 #include <thread>
 
+#include "base/allocator.h"
 #include "server/config.h"
 #include "server/http_server.h"
 #include "server/routes.h"
@@ -212,4 +213,7 @@ int Main(int argc, char** argv) {
 }  // namespace
 }  // namespace motionlod::server
 
-int main(int argc, char** argv) { return motionlod::server::Main(argc, argv); }
+int main(int argc, char** argv) {
+  motionlod::KeepFreedBlocksForReuse();
+  return motionlod::server::Main(argc, argv);
+}

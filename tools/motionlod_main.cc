@@ -19,6 +19,7 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include "base/allocator.h"
 #include "core/solve_levels.h"
 #include "io/asset.h"
 #include "io/sha256.h"
@@ -341,4 +342,7 @@ int Main(int argc, char** argv) {
 }  // namespace
 }  // namespace motionlod::tools
 
-int main(int argc, char** argv) { return motionlod::tools::Main(argc, argv); }
+int main(int argc, char** argv) {
+  motionlod::KeepFreedBlocksForReuse();
+  return motionlod::tools::Main(argc, argv);
+}
