@@ -225,11 +225,13 @@ void ChordAngles(size_t count, const double* normals, const double* dn_x, const 
     const double cx = unit_x[v] - wx * inverse_w, cy = unit_y[v] - wy * inverse_w;
     const double cz = unit_z[v] - wz * inverse_w;
     const double x = 0.5 * std::sqrt(cx * cx + cy * cy + cz * cz);
-    const double x2 = x * x;
-    // asin x = sum_k (2k)! / (4^k (k!)^2 (2k+1)) x^(2k+1), k = 0..7.
+    const double x2 = x * x, x4 = x2 * x2, x8 = x4 * x4;
+    // asin x = sum_k (2k)! / (4^k (k!)^2 (2k+1)) x^(2k+1), k = 0..7, in Estrin's order:
+    // three dependent multiply-adds instead of Horner's eight, which made this loop wait
+    // on its own latency.
     const double series =
-        2 * x * (1 + x2 * (1.0 / 6 + x2 * (3.0 / 40 + x2 * (5.0 / 112 + x2 * (35.0 / 1152 +
-        x2 * (63.0 / 2816 + x2 * (231.0 / 13312 + x2 * (143.0 / 10240))))))));
+        2 * x * ((1 + x2 * (1.0 / 6)) + x4 * (3.0 / 40 + x2 * (5.0 / 112)) +
+                 x8 * ((35.0 / 1152 + x2 * (63.0 / 2816)) + x4 * (231.0 / 13312 + x2 * (143.0 / 10240))));
     angle[v] = x <= 0.25 ? series : -x;
   }
 }
