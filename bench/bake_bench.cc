@@ -234,9 +234,10 @@ StatusOr<Stages> BakeEveryLevel(const core::RawCharacter& raw, const io::Asset& 
                                 int threads) {
   Stages stages;
   auto begin = Clock::now();
+  TaskPool pool(threads);
   auto character = core::BuildCharacter(raw);
   if (!character.ok()) return character.status();
-  auto motion = motion_source.SampleAnimation(animation, 0);
+  auto motion = motion_source.SampleAnimation(animation, 0, &pool);
   if (!motion.ok()) return motion.status();
   if (Status status = core::ValidateMotion(*motion, **character); !status.ok()) return status;
   stages.inputs = SecondsSince(begin);
@@ -260,21 +261,19 @@ StatusOr<Stages> BakeEveryLevel(const core::RawCharacter& raw, const io::Asset& 
   for (int count = n; count >= ranking->locked_count; --count) counts.push_back(count);
   std::vector<std::optional<core::LevelResult>> results(counts.size());
   std::vector<Status> errors(counts.size());
-  ParallelFor(static_cast<int>(counts.size()), ResolveThreads(threads),
-                        [&](int index) {
-                          auto level = core::ReduceSkeletonToCount(**character, *ranking,
-                                                                   counts[index]);
-                          if (!level.ok()) {
-                            errors[index] = level.status();
-                            return;
-                          }
-                          auto result = (*prepared)->SolveLevel(*level);
-                          if (!result.ok()) {
-                            errors[index] = result.status();
-                            return;
-                          }
-                          results[index] = std::move(*result);
-                        });
+  pool.Run(static_cast<int>(counts.size()), [&](int index) {
+    auto level = core::ReduceSkeletonToCount(**character, *ranking, counts[index]);
+    if (!level.ok()) {
+      errors[index] = level.status();
+      return;
+    }
+    auto result = (*prepared)->SolveLevel(*level);
+    if (!result.ok()) {
+      errors[index] = result.status();
+      return;
+    }
+    results[index] = std::move(*result);
+  });
   for (const Status& status : errors) {
     if (!status.ok()) return status;
   }

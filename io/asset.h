@@ -34,6 +34,10 @@
 #include "core/character.h"
 #include "core/motion.h"
 
+namespace motionlod {
+class TaskPool;  // base/parallel.h
+}  // namespace motionlod
+
 namespace motionlod::io {
 
 struct SourceFile {
@@ -84,8 +88,9 @@ class Asset {
   // (fps negative, not finite or above 1000, a result of more than 1e6 frames or 1e7
   // joint matrices, or a joint matrix that is singular or not finite), so that a
   // returned motion always passes core::ValidateMotion. The frames are split over
-  // `threads` threads; the motion does not depend on how many.
-  StatusOr<core::Motion> SampleAnimation(std::string_view name, double fps, int threads = 1) const;
+  // `pool`'s threads (none: the calling thread); the motion does not depend on how many.
+  StatusOr<core::Motion> SampleAnimation(std::string_view name, double fps,
+                                         TaskPool* pool = nullptr) const;
 
   struct Impl;
 

@@ -339,7 +339,7 @@ void PoseSampler::Evaluate(const Clip* clip, double seconds, core::Affine34d* jo
 }
 
 core::Motion SampleClip(const Clip& clip, const std::vector<SceneNode>& nodes,
-                        const std::vector<int>& joint_nodes, double fps, int threads) {
+                        const std::vector<int>& joint_nodes, double fps, TaskPool* pool) {
   core::Motion motion;
   motion.name = clip.info.name;
   motion.fps = fps;
@@ -347,15 +347,20 @@ core::Motion SampleClip(const Clip& clip, const std::vector<SceneNode>& nodes,
   motion.joint_count = static_cast<int>(joint_nodes.size());
   motion.joint_world.resize(static_cast<size_t>(motion.frame_count) * joint_nodes.size());
   // Contiguous frame ranges, one sampler each.
-  const int workers = std::max(1, std::min(threads, motion.frame_count));
-  ParallelFor(workers, workers, [&](int w) {
+  const int workers = std::max(1, std::min(pool != nullptr ? pool->threads() : 1, motion.frame_count));
+  const auto sample_range = [&](int w) {
     PoseSampler sampler(nodes, joint_nodes);
     const int end = static_cast<int>(static_cast<int64_t>(motion.frame_count) * (w + 1) / workers);
     for (int t = static_cast<int>(static_cast<int64_t>(motion.frame_count) * w / workers); t < end; ++t) {
       const double seconds = std::min(t / fps, clip.info.duration_seconds);
       sampler.Evaluate(&clip, seconds, &motion.joint_world[static_cast<size_t>(t) * joint_nodes.size()]);
     }
-  });
+  };
+  if (pool != nullptr) {
+    pool->Run(workers, sample_range);
+  } else {
+    sample_range(0);
+  }
   return motion;
 }
 

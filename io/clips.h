@@ -66,8 +66,9 @@ class PoseSampler {
 };
 
 // Samples `clip` at `fps` (> 0) into a Motion over `joint_nodes`, its frames split over
-// `threads` threads (each frame is sampled on its own: the result does not depend on it).
+// `pool`'s threads, or none (each frame is sampled on its own: the result does not depend
+// on it).
 core::Motion SampleClip(const Clip& clip, const std::vector<SceneNode>& nodes,
-                        const std::vector<int>& joint_nodes, double fps, int threads);
+                        const std::vector<int>& joint_nodes, double fps, TaskPool* pool);
 
 }  // namespace motionlod::io

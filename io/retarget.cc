@@ -205,8 +205,8 @@ StatusOr<RetargetedMotion> RetargetMotion(const core::RawSkeleton& source,
 
 StatusOr<RetargetedMotion> RetargetAnimation(const Asset& source, std::string_view animation,
                                              double fps, const core::RawCharacter& target,
-                                             int threads) {
-  StatusOr<core::Motion> motion = source.SampleAnimation(animation, fps, threads);
+                                             TaskPool* pool) {
+  StatusOr<core::Motion> motion = source.SampleAnimation(animation, fps, pool);
   if (!motion.ok()) return motion.status();
   return RetargetMotion(source.character().skeleton, *motion, target.skeleton);
 }

@@ -49,10 +49,10 @@ std::string NormalizeJointName(std::string_view name);
 // retargets it onto `target`'s skeleton (only the skeleton is used). Errors: those of
 // Asset::SampleAnimation; InvalidArgument for an invalid target skeleton, or when fewer
 // than half of the target's joints match (the message names the unmatched ones).
-// `threads`: as for Asset::SampleAnimation.
+// `pool`: as for Asset::SampleAnimation.
 StatusOr<RetargetedMotion> RetargetAnimation(const Asset& source, std::string_view animation,
                                              double fps, const core::RawCharacter& target,
-                                             int threads = 1);
+                                             TaskPool* pool = nullptr);
 
 // The same on an already sampled motion of `source_skeleton`.
 StatusOr<RetargetedMotion> RetargetMotion(const core::RawSkeleton& source_skeleton,

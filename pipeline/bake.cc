@@ -35,7 +35,7 @@ Status CancelledStatus() { return Status(StatusCode::kNotFound, "the bake was ca
 // cost then balance better over the threads). on_done(levels done) runs on the calling
 // thread as levels complete.
 Status SolveCounts(const core::PreparedMotion& prepared, const core::JointRanking& ranking,
-                   const std::vector<int>& counts, int threads,
+                   const std::vector<int>& counts, TaskPool& pool,
                    std::map<int, core::LevelResult>& out,
                    const std::function<void(int)>& on_done, const std::atomic<bool>* cancel) {
   const size_t count = counts.size();
@@ -51,8 +51,8 @@ Status SolveCounts(const core::PreparedMotion& prepared, const core::JointRankin
   std::vector<Status> errors(2 * count);
   std::vector<std::atomic<int>> halves_done(count);
   size_t reported = 0;
-  ParallelFor(
-      static_cast<int>(2 * count), threads,
+  pool.Run(
+      static_cast<int>(2 * count),
       [&](int task) {
         if (Cancelled(cancel)) return;
         const size_t index = static_cast<size_t>(task / 2);
@@ -121,8 +121,10 @@ std::vector<int> DefaultLadder(int joint_count, int minimum) {
   return ladder;
 }
 
-StatusOr<BakeInputs> PrepareInputs(const BakeRequest& request) {
-  if (Status status = request.Validate(); !status.ok()) return status;
+namespace {
+
+// PrepareInputs for a validated request, on `pool`.
+StatusOr<BakeInputs> PrepareInputsOn(const BakeRequest& request, TaskPool& pool) {
   BakeInputs inputs;
   const io::Asset& character_asset = *request.character;
   inputs.warnings = character_asset.warnings();
@@ -130,13 +132,12 @@ StatusOr<BakeInputs> PrepareInputs(const BakeRequest& request) {
   std::optional<StatusOr<std::shared_ptr<const core::Character>>> character;
   Status motion_status;
   std::vector<std::string> motion_warnings;
-  const int threads = ResolveThreads(request.threads);
-  ParallelFor(2, threads, [&](int task) {
+  pool.Run(2, [&](int task) {
     if (task == 0) {
       character = core::BuildCharacter(character_asset.character());
     } else if (request.motion) {
       auto retargeted = io::RetargetAnimation(*request.motion, request.animation, request.fps,
-                                              character_asset.character(), threads);
+                                              character_asset.character(), &pool);
       if (!retargeted.ok()) {
         motion_status = retargeted.status();
         return;
@@ -149,7 +150,7 @@ StatusOr<BakeInputs> PrepareInputs(const BakeRequest& request) {
         motion_warnings.push_back("the motion's joint '" + name + "' matches no joint of the character");
       }
     } else {
-      auto motion = character_asset.SampleAnimation(request.animation, request.fps, threads);
+      auto motion = character_asset.SampleAnimation(request.animation, request.fps, &pool);
       if (!motion.ok()) {
         motion_status = motion.status();
         return;
@@ -165,6 +166,14 @@ StatusOr<BakeInputs> PrepareInputs(const BakeRequest& request) {
     return status;
   }
   return inputs;
+}
+
+}  // namespace
+
+StatusOr<BakeInputs> PrepareInputs(const BakeRequest& request) {
+  if (Status status = request.Validate(); !status.ok()) return status;
+  TaskPool pool(request.threads);
+  return PrepareInputsOn(request, pool);
 }
 
 double SkinningPassSeconds(const core::Character& character, const core::Motion& motion,
@@ -184,8 +193,10 @@ double SkinningPassSeconds(const core::Character& character, const core::Motion&
     s.positions.resize(p);
     s.normals.resize(p);
   }
+  // The pool's start is timed, as Bake's is.
   const auto start = Clock::now();
-  ParallelFor(workers, workers, [&](int w) {
+  TaskPool pool(workers);
+  pool.Run(workers, [&](int w) {
     Scratch& s = scratch[w];
     for (int t = w; t < motion.frame_count; t += workers) {
       for (int j = 0; j < n; ++j) {
@@ -205,7 +216,9 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
     if (progress) progress({std::clamp(fraction, 0.0, 1.0), stage});
   };
   report_progress(0.0, "import");
-  auto inputs = PrepareInputs(request);
+  if (Status status = request.Validate(); !status.ok()) return status;
+  TaskPool pool(request.threads);
+  auto inputs = PrepareInputsOn(request, pool);
   if (!inputs.ok()) return inputs.status();
   const core::Character& character = *inputs->character;
   const core::Motion& motion = inputs->motion;
@@ -220,8 +233,8 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
   std::optional<StatusOr<std::shared_ptr<const core::PreparedMotion>>> created;
   std::atomic<bool> ranking_done{false};
   bool prepare_reported = false;
-  ParallelFor(
-      2, threads,
+  pool.Run(
+      2,
       [&](int task) {
         if (task == 0) {
           ranked = core::RankJointsJob{&character, &motion, request.locked_joints}.Run();
@@ -275,7 +288,7 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
                                       std::max<size_t>(counts.size() + (default_ladder ? 1 : 0), 1),
                     "solve");
   };
-  if (Status status = SolveCounts(**prepared, *ranking, counts, threads, solved, on_level_done, cancel);
+  if (Status status = SolveCounts(**prepared, *ranking, counts, pool, solved, on_level_done, cancel);
       !status.ok()) {
     return status;
   }
@@ -332,7 +345,7 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
     if (!solved.count(hi)) {
       counts.push_back(hi);
       std::sort(counts.begin(), counts.end(), std::greater<>());
-      if (Status status = SolveCounts(**prepared, *ranking, {hi}, threads, solved, on_level_done, cancel);
+      if (Status status = SolveCounts(**prepared, *ranking, {hi}, pool, solved, on_level_done, cancel);
           !status.ok()) {
         return status;
       }
@@ -352,7 +365,7 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
       std::vector<int> every;
       for (int count = n; count >= minimum; --count) every.push_back(count);
       std::map<int, core::LevelResult> results;
-      if (Status status = SolveCounts(**variant_prepared, *ranking, every, threads, results, {}, cancel);
+      if (Status status = SolveCounts(**variant_prepared, *ranking, every, pool, results, {}, cancel);
           !status.ok()) {
         return status;
       }
@@ -380,8 +393,8 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
   data.joint_names = character.skeleton().joint_names;
   data.parents.assign(character.skeleton().parents.begin(), character.skeleton().parents.end());
   data.levels.resize(counts.size());
-  ParallelFor(static_cast<int>(counts.size()), threads,
-              [&](int index) { data.levels[index] = LevelDataOf(solved.at(counts[index])); });
+  pool.Run(static_cast<int>(counts.size()),
+           [&](int index) { data.levels[index] = LevelDataOf(solved.at(counts[index])); });
   auto encoded = proto::EncodeLevelSet(data);
   if (!encoded.ok()) return encoded.status();
   const double bake_seconds = SecondsSince(start);

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <numbers>
 
+#include "base/parallel.h"
 #include "core/character.h"
 #include "core/motion.h"
 #include "gltf_fixture.h"
@@ -180,9 +181,10 @@ TEST(SampleAnimation, ThreadsSplitTheFramesWithoutChangingThem) {
   MOTIONLOD_REQUIRE_DATA();
   for (const char* file : {"motions/cmu_131_01.bvh", "characters/RobotExpressive.glb"}) {
     const auto asset = DataAsset(file);
-    const core::Motion one = *asset->SampleAnimation("", 0, 1);
+    const core::Motion one = *asset->SampleAnimation("", 0);
     for (int threads : {2, 3, 7}) {
-      const core::Motion split = *asset->SampleAnimation("", 0, threads);
+      TaskPool pool(threads);
+      const core::Motion split = *asset->SampleAnimation("", 0, &pool);
       ASSERT_EQ(split.frame_count, one.frame_count) << file;
       ASSERT_EQ(split.joint_world.size(), one.joint_world.size()) << file;
       for (size_t q = 0; q < one.joint_world.size(); ++q) {
