@@ -11,6 +11,8 @@
 #include <thread>
 #include <vector>
 
+#include "base/pieces.h"
+
 namespace motionlod {
 
 inline int ResolveThreads(int threads) {
@@ -44,6 +46,11 @@ class TaskPool {
   TaskPool& operator=(const TaskPool&) = delete;
 
   int threads() const { return threads_; }
+
+  // Run as a PieceRunner, for the core's functions that take one (base/pieces.h).
+  PieceRunner Runner() {
+    return [this](int count, const std::function<void(int)>& piece) { Run(count, piece); };
+  }
 
   // Runs piece(index) for every index in [0, count) and returns when all have run. Pieces
   // are handed out in order, to the workers and to the calling thread; on_done(done) runs

@@ -235,7 +235,7 @@ StatusOr<Stages> BakeEveryLevel(const core::RawCharacter& raw, const io::Asset& 
   Stages stages;
   auto begin = Clock::now();
   TaskPool pool(threads);
-  auto character = core::BuildCharacter(raw);
+  auto character = core::BuildCharacter(raw, pool.Runner());
   if (!character.ok()) return character.status();
   auto motion = motion_source.SampleAnimation(animation, 0, &pool);
   if (!motion.ok()) return motion.status();

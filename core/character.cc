@@ -117,7 +117,7 @@ int Character::FindJoint(const std::string& name) const {
              : static_cast<int>(it - skeleton_.joint_names.begin());
 }
 
-StatusOr<std::shared_ptr<const Character>> BuildCharacter(RawCharacter raw) {
+StatusOr<std::shared_ptr<const Character>> BuildCharacter(RawCharacter raw, const PieceRunner& run) {
   if (Status status = ValidateRawCharacter(raw); !status.ok()) return status;
 
   std::shared_ptr<Character> c(new Character());
@@ -132,28 +132,6 @@ StatusOr<std::shared_ptr<const Character>> BuildCharacter(RawCharacter raw) {
   c->children_.assign(n, {});
   for (int j = 1; j < n; ++j) c->children_[s.parents[j]].push_back(j);
 
-  // A_i: each triangle's area goes to its three corners.
-  c->vertex_areas_.assign(p, 0.0);
-  for (const auto& tri : k.triangles) {
-    const Vec3d a = k.positions[tri[0]].cast<double>();
-    const Vec3d b = k.positions[tri[1]].cast<double>();
-    const Vec3d d = k.positions[tri[2]].cast<double>();
-    const double area = 0.5 * (b - a).cross(d - a).norm();
-    for (uint32_t v : tri) c->vertex_areas_[v] += area;
-  }
-  // Vertices outside every triangle (point clouds, degenerate faces) still count:
-  // they get the mean area so the fit never ignores them.
-  double total_area = 0;
-  int with_area = 0;
-  for (double a : c->vertex_areas_) {
-    total_area += a;
-    with_area += a > 0;
-  }
-  const double fallback_area = with_area > 0 ? total_area / with_area : 1.0;
-  for (double& a : c->vertex_areas_) {
-    if (a <= 0) a = fallback_area;
-  }
-
   Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
   Eigen::Vector3d hi = -lo;
   for (const Vec3f& v : k.positions) {
@@ -163,197 +141,226 @@ StatusOr<std::shared_ptr<const Character>> BuildCharacter(RawCharacter raw) {
   c->height_ = (hi - lo).maxCoeff();
   if (!(c->height_ > 0)) c->height_ = 1.0;
 
-  // Bounding box of each joint's weighted vertices.
-  {
-    std::vector<Vec3d> lo(n, Vec3d::Constant(std::numeric_limits<double>::infinity()));
-    std::vector<Vec3d> hi(n, Vec3d::Constant(-std::numeric_limits<double>::infinity()));
-    for (int i = 0; i < p; ++i) {
-      for (uint32_t e = k.influence_offsets[i]; e < k.influence_offsets[i + 1]; ++e) {
-        const int j = k.influence_joints[e];
-        lo[j] = lo[j].cwiseMin(k.positions[i].cast<double>());
-        hi[j] = hi[j].cwiseMax(k.positions[i].cast<double>());
+  // Two independent halves, side by side where the caller has threads: the skin's
+  // bounds, clusters and subtree lengths; its areas and pair moments.
+  const auto bounds_and_lengths = [&] {
+    // Bounding box of each joint's weighted vertices.
+    {
+      std::vector<Vec3d> lo(n, Vec3d::Constant(std::numeric_limits<double>::infinity()));
+      std::vector<Vec3d> hi(n, Vec3d::Constant(-std::numeric_limits<double>::infinity()));
+      for (int i = 0; i < p; ++i) {
+        for (uint32_t e = k.influence_offsets[i]; e < k.influence_offsets[i + 1]; ++e) {
+          const int j = k.influence_joints[e];
+          lo[j] = lo[j].cwiseMin(k.positions[i].cast<double>());
+          hi[j] = hi[j].cwiseMax(k.positions[i].cast<double>());
+        }
       }
-    }
-    c->joint_vertex_centers_.resize(n);
-    c->joint_vertex_half_extents_.assign(n, Vec3d::Zero());
-    for (int j = 0; j < n; ++j) {
-      if (lo[j].x() > hi[j].x()) {
-        c->joint_vertex_centers_[j] = s.bind_world[j].col(3);
-      } else {
-        c->joint_vertex_centers_[j] = 0.5 * (lo[j] + hi[j]);
-        c->joint_vertex_half_extents_[j] = 0.5 * (hi[j] - lo[j]);
-      }
-    }
-  }
-  // Vertices grouped by dominant joint (a counting sort), then clustered per group.
-  std::vector<int> dominant_joint(p, 0);
-  for (int i = 0; i < p; ++i) {
-    float largest = -1;
-    for (uint32_t e = k.influence_offsets[i]; e < k.influence_offsets[i + 1]; ++e) {
-      if (k.influence_weights[e] > largest) {
-        largest = k.influence_weights[e];
-        dominant_joint[i] = k.influence_joints[e];
-      }
-    }
-  }
-  std::vector<uint32_t> group_offsets(n + 1, 0);
-  for (int i = 0; i < p; ++i) ++group_offsets[dominant_joint[i] + 1];
-  for (int j = 0; j < n; ++j) group_offsets[j + 1] += group_offsets[j];
-  c->cluster_vertices_.resize(p);
-  {
-    std::vector<uint32_t> cursor(group_offsets.begin(), group_offsets.end() - 1);
-    for (int i = 0; i < p; ++i) c->cluster_vertices_[cursor[dominant_joint[i]]++] = static_cast<uint32_t>(i);
-  }
-  // The largest weight each joint gives the vertices [begin, end), appended as a list.
-  std::vector<float> max_weight(n, 0.0f);
-  std::vector<int32_t> touched;
-  auto append_influences = [&](const uint32_t* begin, const uint32_t* end,
-                               std::vector<Character::MaxInfluence>& list,
-                               std::vector<uint32_t>& offsets) {
-    for (const uint32_t* v = begin; v != end; ++v) {
-      for (uint32_t e = k.influence_offsets[*v]; e < k.influence_offsets[*v + 1]; ++e) {
-        const int32_t j = k.influence_joints[e];
-        if (max_weight[j] == 0) touched.push_back(j);
-        max_weight[j] = std::max(max_weight[j], k.influence_weights[e]);
-      }
-    }
-    for (int32_t j : touched) {
-      list.push_back({j, max_weight[j]});
-      max_weight[j] = 0;
-    }
-    touched.clear();
-    offsets.push_back(static_cast<uint32_t>(list.size()));
-  };
-  c->group_cluster_offsets_.assign(1, 0);
-  c->cluster_vertex_offsets_.assign(1, 0);
-  c->group_influence_offsets_.assign(1, 0);
-  c->cluster_influence_offsets_.assign(1, 0);
-  uint32_t* base = c->cluster_vertices_.data();
-  c->group_centers_.assign(n, Vec3d::Zero());
-  c->group_half_extents_.assign(n, Vec3d::Zero());
-  // The splitting works on a contiguous copy of each group's positions: comparing through
-  // the vertex indices cost a cache miss per comparison on a large mesh. The partition is
-  // the same as on the indices (same keys, same order, same algorithm).
-  struct ClusterPoint {
-    float position[3];
-    uint32_t vertex;
-  };
-  std::vector<ClusterPoint> points;
-  auto point_box = [](const ClusterPoint* begin, const ClusterPoint* end, Vec3d& center, Vec3d& half) {
-    float lo[3], hi[3];
-    for (int a = 0; a < 3; ++a) lo[a] = hi[a] = begin->position[a];
-    for (const ClusterPoint* q = begin + 1; q != end; ++q) {
-      for (int a = 0; a < 3; ++a) {
-        lo[a] = std::min(lo[a], q->position[a]);
-        hi[a] = std::max(hi[a], q->position[a]);
-      }
-    }
-    for (int a = 0; a < 3; ++a) {
-      center[a] = 0.5 * (static_cast<double>(lo[a]) + static_cast<double>(hi[a]));
-      half[a] = 0.5 * (static_cast<double>(hi[a]) - static_cast<double>(lo[a]));
-    }
-  };
-  std::vector<std::pair<uint32_t, uint32_t>> stack;
-  for (int j = 0; j < n; ++j) {
-    const uint32_t begin = group_offsets[j], end = group_offsets[j + 1];
-    append_influences(base + begin, base + end, c->group_influences_, c->group_influence_offsets_);
-    if (begin != end) {
-      points.resize(end - begin);
-      for (uint32_t e = begin; e < end; ++e) {
-        const Vec3f& position = k.positions[base[e]];
-        points[e - begin] = {{position.x(), position.y(), position.z()}, base[e]};
-      }
-      point_box(points.data(), points.data() + points.size(), c->group_centers_[j], c->group_half_extents_[j]);
-      // Depth-first splitting keeps each cluster's vertices contiguous.
-      stack.push_back({0, end - begin});
-    }
-    while (!stack.empty()) {
-      const auto [lo, hi] = stack.back();
-      stack.pop_back();
-      Vec3d center, half;
-      point_box(points.data() + lo, points.data() + hi, center, half);
-      if (hi - lo <= static_cast<uint32_t>(Character::kMaxClusterVertices)) {
-        for (uint32_t e = lo; e < hi; ++e) base[begin + e] = points[e].vertex;
-        c->cluster_vertex_offsets_.push_back(begin + hi);
-        c->cluster_centers_.push_back(center);
-        c->cluster_half_extents_.push_back(half);
-        append_influences(base + begin + lo, base + begin + hi, c->cluster_influences_,
-                          c->cluster_influence_offsets_);
-        continue;
-      }
-      int axis = 0;
-      half.maxCoeff(&axis);
-      const uint32_t mid = lo + (hi - lo) / 2;
-      std::nth_element(points.data() + lo, points.data() + mid, points.data() + hi,
-                       [axis](const ClusterPoint& x, const ClusterPoint& y) {
-                         return x.position[axis] < y.position[axis];
-                       });
-      stack.push_back({mid, hi});
-      stack.push_back({lo, mid});
-    }
-    c->group_cluster_offsets_.push_back(static_cast<uint32_t>(c->cluster_centers_.size()));
-  }
-
-  // h_j = l_j: summed distance from joint j to each leaf of its subtree. A childless
-  // joint that dominates some vertices ends at a virtual end site, its farthest such
-  // vertex (glTF rigs rarely carry the "...Nub" end joints of fig. 2); a childless
-  // joint without skin is itself the leaf.
-  std::vector<Vec3d> leaf_point(n);
-  std::vector<double> end_site_distance(n, -1.0);
-  for (int j = 0; j < n; ++j) leaf_point[j] = s.bind_world[j].col(3);
-  for (int i = 0; i < p; ++i) {
-    int dominant = -1;
-    float dominant_weight = 0.5f;
-    for (uint32_t e = k.influence_offsets[i]; e < k.influence_offsets[i + 1]; ++e) {
-      if (k.influence_weights[e] > dominant_weight) {
-        dominant_weight = k.influence_weights[e];
-        dominant = k.influence_joints[e];
-      }
-    }
-    if (dominant < 0 || !c->children_[dominant].empty()) continue;
-    const Vec3d v = k.positions[i].cast<double>();
-    const double d = (v - s.bind_world[dominant].col(3)).norm();
-    if (d > end_site_distance[dominant]) {
-      end_site_distance[dominant] = d;
-      leaf_point[dominant] = v;
-    }
-  }
-  c->subtree_lengths_.assign(n, 0.0);
-  for (int q = 0; q < n; ++q) {
-    if (!c->children_[q].empty()) continue;
-    for (int j = q; j >= 0; j = s.parents[j]) {
-      c->subtree_lengths_[j] += (leaf_point[q] - Vec3d(s.bind_world[j].col(3))).norm();
-    }
-  }
-  // Pair moments, accumulated per (k <= l) block of an n x n table, then listed.
-  {
-    double total = 0;
-    for (double a : c->vertex_areas_) total += a;
-    std::vector<int> slot(static_cast<size_t>(n) * n, -1);
-    auto& moments = c->joint_pair_moments_;
-    for (int i = 0; i < p; ++i) {
-      const double a = c->vertex_areas_[i] / total;
-      Eigen::Vector4d vh;
-      vh << k.positions[i].cast<double>(), 1.0;
-      const Vec3d normal = k.normals[i].cast<double>();
-      const Eigen::Matrix4d vv = vh * vh.transpose();
-      const Eigen::Matrix3d nn = normal * normal.transpose();
-      for (uint32_t e = k.influence_offsets[i]; e < k.influence_offsets[i + 1]; ++e) {
-        for (uint32_t g = e; g < k.influence_offsets[i + 1]; ++g) {
-          const int lo = std::min(k.influence_joints[e], k.influence_joints[g]);
-          const int hi = std::max(k.influence_joints[e], k.influence_joints[g]);
-          int& index = slot[static_cast<size_t>(lo) * n + hi];
-          if (index < 0) {
-            index = static_cast<int>(moments.size());
-            moments.push_back({lo, hi, Eigen::Matrix4d::Zero(), Eigen::Matrix3d::Zero()});
-          }
-          const double w = a * k.influence_weights[e] * k.influence_weights[g];
-          moments[index].position_moment += w * vv;
-          moments[index].normal_moment += w * nn;
+      c->joint_vertex_centers_.resize(n);
+      c->joint_vertex_half_extents_.assign(n, Vec3d::Zero());
+      for (int j = 0; j < n; ++j) {
+        if (lo[j].x() > hi[j].x()) {
+          c->joint_vertex_centers_[j] = s.bind_world[j].col(3);
+        } else {
+          c->joint_vertex_centers_[j] = 0.5 * (lo[j] + hi[j]);
+          c->joint_vertex_half_extents_[j] = 0.5 * (hi[j] - lo[j]);
         }
       }
     }
-  }
+    // Vertices grouped by dominant joint (a counting sort), then clustered per group.
+    std::vector<int> dominant_joint(p, 0);
+    for (int i = 0; i < p; ++i) {
+      float largest = -1;
+      for (uint32_t e = k.influence_offsets[i]; e < k.influence_offsets[i + 1]; ++e) {
+        if (k.influence_weights[e] > largest) {
+          largest = k.influence_weights[e];
+          dominant_joint[i] = k.influence_joints[e];
+        }
+      }
+    }
+    std::vector<uint32_t> group_offsets(n + 1, 0);
+    for (int i = 0; i < p; ++i) ++group_offsets[dominant_joint[i] + 1];
+    for (int j = 0; j < n; ++j) group_offsets[j + 1] += group_offsets[j];
+    c->cluster_vertices_.resize(p);
+    {
+      std::vector<uint32_t> cursor(group_offsets.begin(), group_offsets.end() - 1);
+      for (int i = 0; i < p; ++i) c->cluster_vertices_[cursor[dominant_joint[i]]++] = static_cast<uint32_t>(i);
+    }
+    // The largest weight each joint gives the vertices [begin, end), appended as a list.
+    std::vector<float> max_weight(n, 0.0f);
+    std::vector<int32_t> touched;
+    auto append_influences = [&](const uint32_t* begin, const uint32_t* end,
+                                 std::vector<Character::MaxInfluence>& list,
+                                 std::vector<uint32_t>& offsets) {
+      for (const uint32_t* v = begin; v != end; ++v) {
+        for (uint32_t e = k.influence_offsets[*v]; e < k.influence_offsets[*v + 1]; ++e) {
+          const int32_t j = k.influence_joints[e];
+          if (max_weight[j] == 0) touched.push_back(j);
+          max_weight[j] = std::max(max_weight[j], k.influence_weights[e]);
+        }
+      }
+      for (int32_t j : touched) {
+        list.push_back({j, max_weight[j]});
+        max_weight[j] = 0;
+      }
+      touched.clear();
+      offsets.push_back(static_cast<uint32_t>(list.size()));
+    };
+    c->group_cluster_offsets_.assign(1, 0);
+    c->cluster_vertex_offsets_.assign(1, 0);
+    c->group_influence_offsets_.assign(1, 0);
+    c->cluster_influence_offsets_.assign(1, 0);
+    uint32_t* base = c->cluster_vertices_.data();
+    c->group_centers_.assign(n, Vec3d::Zero());
+    c->group_half_extents_.assign(n, Vec3d::Zero());
+    // The splitting works on a contiguous copy of each group's positions: comparing through
+    // the vertex indices cost a cache miss per comparison on a large mesh. The partition is
+    // the same as on the indices (same keys, same order, same algorithm).
+    struct ClusterPoint {
+      float position[3];
+      uint32_t vertex;
+    };
+    std::vector<ClusterPoint> points;
+    auto point_box = [](const ClusterPoint* begin, const ClusterPoint* end, Vec3d& center, Vec3d& half) {
+      float lo[3], hi[3];
+      for (int a = 0; a < 3; ++a) lo[a] = hi[a] = begin->position[a];
+      for (const ClusterPoint* q = begin + 1; q != end; ++q) {
+        for (int a = 0; a < 3; ++a) {
+          lo[a] = std::min(lo[a], q->position[a]);
+          hi[a] = std::max(hi[a], q->position[a]);
+        }
+      }
+      for (int a = 0; a < 3; ++a) {
+        center[a] = 0.5 * (static_cast<double>(lo[a]) + static_cast<double>(hi[a]));
+        half[a] = 0.5 * (static_cast<double>(hi[a]) - static_cast<double>(lo[a]));
+      }
+    };
+    std::vector<std::pair<uint32_t, uint32_t>> stack;
+    for (int j = 0; j < n; ++j) {
+      const uint32_t begin = group_offsets[j], end = group_offsets[j + 1];
+      append_influences(base + begin, base + end, c->group_influences_, c->group_influence_offsets_);
+      if (begin != end) {
+        points.resize(end - begin);
+        for (uint32_t e = begin; e < end; ++e) {
+          const Vec3f& position = k.positions[base[e]];
+          points[e - begin] = {{position.x(), position.y(), position.z()}, base[e]};
+        }
+        point_box(points.data(), points.data() + points.size(), c->group_centers_[j], c->group_half_extents_[j]);
+        // Depth-first splitting keeps each cluster's vertices contiguous.
+        stack.push_back({0, end - begin});
+      }
+      while (!stack.empty()) {
+        const auto [lo, hi] = stack.back();
+        stack.pop_back();
+        Vec3d center, half;
+        point_box(points.data() + lo, points.data() + hi, center, half);
+        if (hi - lo <= static_cast<uint32_t>(Character::kMaxClusterVertices)) {
+          for (uint32_t e = lo; e < hi; ++e) base[begin + e] = points[e].vertex;
+          c->cluster_vertex_offsets_.push_back(begin + hi);
+          c->cluster_centers_.push_back(center);
+          c->cluster_half_extents_.push_back(half);
+          append_influences(base + begin + lo, base + begin + hi, c->cluster_influences_,
+                            c->cluster_influence_offsets_);
+          continue;
+        }
+        int axis = 0;
+        half.maxCoeff(&axis);
+        const uint32_t mid = lo + (hi - lo) / 2;
+        std::nth_element(points.data() + lo, points.data() + mid, points.data() + hi,
+                         [axis](const ClusterPoint& x, const ClusterPoint& y) {
+                           return x.position[axis] < y.position[axis];
+                         });
+        stack.push_back({mid, hi});
+        stack.push_back({lo, mid});
+      }
+      c->group_cluster_offsets_.push_back(static_cast<uint32_t>(c->cluster_centers_.size()));
+    }
+
+    // h_j = l_j: summed distance from joint j to each leaf of its subtree. A childless
+    // joint that dominates some vertices ends at a virtual end site, its farthest such
+    // vertex (glTF rigs rarely carry the "...Nub" end joints of fig. 2); a childless
+    // joint without skin is itself the leaf.
+    std::vector<Vec3d> leaf_point(n);
+    std::vector<double> end_site_distance(n, -1.0);
+    for (int j = 0; j < n; ++j) leaf_point[j] = s.bind_world[j].col(3);
+    for (int i = 0; i < p; ++i) {
+      int dominant = -1;
+      float dominant_weight = 0.5f;
+      for (uint32_t e = k.influence_offsets[i]; e < k.influence_offsets[i + 1]; ++e) {
+        if (k.influence_weights[e] > dominant_weight) {
+          dominant_weight = k.influence_weights[e];
+          dominant = k.influence_joints[e];
+        }
+      }
+      if (dominant < 0 || !c->children_[dominant].empty()) continue;
+      const Vec3d v = k.positions[i].cast<double>();
+      const double d = (v - s.bind_world[dominant].col(3)).norm();
+      if (d > end_site_distance[dominant]) {
+        end_site_distance[dominant] = d;
+        leaf_point[dominant] = v;
+      }
+    }
+    c->subtree_lengths_.assign(n, 0.0);
+    for (int q = 0; q < n; ++q) {
+      if (!c->children_[q].empty()) continue;
+      for (int j = q; j >= 0; j = s.parents[j]) {
+        c->subtree_lengths_[j] += (leaf_point[q] - Vec3d(s.bind_world[j].col(3))).norm();
+      }
+    }
+  };
+  const auto areas_and_moments = [&] {
+    // A_i: each triangle's area goes to its three corners.
+    c->vertex_areas_.assign(p, 0.0);
+    for (const auto& tri : k.triangles) {
+      const Vec3d a = k.positions[tri[0]].cast<double>();
+      const Vec3d b = k.positions[tri[1]].cast<double>();
+      const Vec3d d = k.positions[tri[2]].cast<double>();
+      const double area = 0.5 * (b - a).cross(d - a).norm();
+      for (uint32_t v : tri) c->vertex_areas_[v] += area;
+    }
+    // Vertices outside every triangle (point clouds, degenerate faces) still count:
+    // they get the mean area so the fit never ignores them.
+    double total_area = 0;
+    int with_area = 0;
+    for (double a : c->vertex_areas_) {
+      total_area += a;
+      with_area += a > 0;
+    }
+    const double fallback_area = with_area > 0 ? total_area / with_area : 1.0;
+    for (double& a : c->vertex_areas_) {
+      if (a <= 0) a = fallback_area;
+    }
+
+    // Pair moments, accumulated per (k <= l) block of an n x n table, then listed.
+    {
+      double total = 0;
+      for (double a : c->vertex_areas_) total += a;
+      std::vector<int> slot(static_cast<size_t>(n) * n, -1);
+      auto& moments = c->joint_pair_moments_;
+      for (int i = 0; i < p; ++i) {
+        const double a = c->vertex_areas_[i] / total;
+        Eigen::Vector4d vh;
+        vh << k.positions[i].cast<double>(), 1.0;
+        const Vec3d normal = k.normals[i].cast<double>();
+        const Eigen::Matrix4d vv = vh * vh.transpose();
+        const Eigen::Matrix3d nn = normal * normal.transpose();
+        for (uint32_t e = k.influence_offsets[i]; e < k.influence_offsets[i + 1]; ++e) {
+          for (uint32_t g = e; g < k.influence_offsets[i + 1]; ++g) {
+            const int lo = std::min(k.influence_joints[e], k.influence_joints[g]);
+            const int hi = std::max(k.influence_joints[e], k.influence_joints[g]);
+            int& index = slot[static_cast<size_t>(lo) * n + hi];
+            if (index < 0) {
+              index = static_cast<int>(moments.size());
+              moments.push_back({lo, hi, Eigen::Matrix4d::Zero(), Eigen::Matrix3d::Zero()});
+            }
+            const double w = a * k.influence_weights[e] * k.influence_weights[g];
+            moments[index].position_moment += w * vv;
+            moments[index].normal_moment += w * nn;
+          }
+        }
+      }
+    }
+  };
+  RunPieces(run, 2, [&](int piece) { piece == 0 ? bounds_and_lengths() : areas_and_moments(); });
   return std::shared_ptr<const Character>(std::move(c));
 }
 

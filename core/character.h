@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "base/pieces.h"
 #include "base/status.h"
 #include "core/types.h"
 
@@ -115,7 +116,8 @@ class Character {
   const std::vector<JointPairMoment>& joint_pair_moments() const { return joint_pair_moments_; }
 
  private:
-  friend StatusOr<std::shared_ptr<const Character>> BuildCharacter(RawCharacter raw);
+  friend StatusOr<std::shared_ptr<const Character>> BuildCharacter(RawCharacter raw,
+                                                                   const PieceRunner& run);
   Character() = default;
 
   std::string name_;
@@ -141,6 +143,8 @@ class Character {
   std::vector<JointPairMoment> joint_pair_moments_;
 };
 
-StatusOr<std::shared_ptr<const Character>> BuildCharacter(RawCharacter raw);
+// `run`: where its two independent halves run (base/pieces.h); the result is the same.
+StatusOr<std::shared_ptr<const Character>> BuildCharacter(RawCharacter raw,
+                                                          const PieceRunner& run = {});
 
 }  // namespace motionlod::core

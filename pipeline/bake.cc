@@ -134,7 +134,7 @@ StatusOr<BakeInputs> PrepareInputsOn(const BakeRequest& request, TaskPool& pool)
   std::vector<std::string> motion_warnings;
   pool.Run(2, [&](int task) {
     if (task == 0) {
-      character = core::BuildCharacter(character_asset.character());
+      character = core::BuildCharacter(character_asset.character(), pool.Runner());
     } else if (request.motion) {
       auto retargeted = io::RetargetAnimation(*request.motion, request.animation, request.fps,
                                               character_asset.character(), &pool);

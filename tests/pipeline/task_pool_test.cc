@@ -4,8 +4,12 @@
 
 #include <atomic>
 #include <chrono>
+#include <filesystem>
 #include <thread>
 #include <vector>
+
+#include "core/character.h"
+#include "io/asset.h"
 
 namespace motionlod {
 namespace {
@@ -66,6 +70,38 @@ TEST(TaskPool, NestedAndConcurrentRunsComplete) {
   for (int c = 0; c < 3; ++c) callers.emplace_back([&] { nested(4, nested); });
   for (std::thread& caller : callers) caller.join();
   EXPECT_EQ(leaves.load(), 3 * 81);
+}
+
+// BuildCharacter's two halves on a pool give the character they give on one thread, to the
+// bit, on real skins.
+TEST(TaskPool, BuildsTheSameCharacterAsOneThread) {
+  const std::filesystem::path data = MOTIONLOD_SHARED_DATA;
+  if (!std::filesystem::exists(data / "MANIFEST.md")) GTEST_SKIP() << "../shared/data is absent";
+  TaskPool pool(2);
+  for (const char* file : {"characters/stormtrooper.dae", "characters/RobotExpressive.glb"}) {
+    auto asset = io::LoadAssetFile(data / file);
+    ASSERT_TRUE(asset.ok()) << file;
+    const auto one = *core::BuildCharacter((*asset)->character());
+    const auto split = *core::BuildCharacter((*asset)->character(), pool.Runner());
+    EXPECT_EQ(split->height(), one->height()) << file;
+    EXPECT_EQ(split->vertex_areas(), one->vertex_areas()) << file;
+    EXPECT_EQ(split->subtree_lengths(), one->subtree_lengths()) << file;
+    EXPECT_EQ(split->joint_vertex_centers(), one->joint_vertex_centers()) << file;
+    EXPECT_EQ(split->joint_vertex_half_extents(), one->joint_vertex_half_extents()) << file;
+    EXPECT_EQ(split->cluster_vertices(), one->cluster_vertices()) << file;
+    EXPECT_EQ(split->cluster_vertex_offsets(), one->cluster_vertex_offsets()) << file;
+    EXPECT_EQ(split->cluster_centers(), one->cluster_centers()) << file;
+    EXPECT_EQ(split->group_cluster_offsets(), one->group_cluster_offsets()) << file;
+    ASSERT_EQ(split->joint_pair_moments().size(), one->joint_pair_moments().size()) << file;
+    for (size_t q = 0; q < one->joint_pair_moments().size(); ++q) {
+      const auto& a = split->joint_pair_moments()[q];
+      const auto& b = one->joint_pair_moments()[q];
+      EXPECT_EQ(a.k, b.k);
+      EXPECT_EQ(a.l, b.l);
+      EXPECT_EQ(a.position_moment, b.position_moment) << file << " pair " << q;
+      EXPECT_EQ(a.normal_moment, b.normal_moment) << file << " pair " << q;
+    }
+  }
 }
 
 }  // namespace
