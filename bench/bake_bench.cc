@@ -290,8 +290,10 @@ StatusOr<Stages> BakeEveryLevel(const core::RawCharacter& raw, const io::Asset& 
   data.joint_names = (*character)->skeleton().joint_names;
   data.parents.assign((*character)->skeleton().parents.begin(),
                       (*character)->skeleton().parents.end());
-  for (const auto& r : results) data.levels.push_back(pipeline::LevelDataOf(*r));
-  auto encoded = proto::EncodeLevelSet(data);
+  data.levels.resize(results.size());
+  pool.Run(static_cast<int>(results.size()),
+           [&](int index) { data.levels[index] = pipeline::LevelDataOf(*results[index]); });
+  auto encoded = proto::EncodeLevelSet(data, pool.Runner());
   if (!encoded.ok()) return encoded.status();
   benchmark::DoNotOptimize(encoded->data());
   stages.encode = SecondsSince(begin);

@@ -395,7 +395,7 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
   data.levels.resize(counts.size());
   pool.Run(static_cast<int>(counts.size()),
            [&](int index) { data.levels[index] = LevelDataOf(solved.at(counts[index])); });
-  auto encoded = proto::EncodeLevelSet(data);
+  auto encoded = proto::EncodeLevelSet(data, pool.Runner());
   if (!encoded.ok()) return encoded.status();
   const double bake_seconds = SecondsSince(start);
 

@@ -310,7 +310,8 @@ std::string CheckMatrices(size_t l, uint32_t frame_count, size_t m, bool rigid,
   return {};
 }
 
-std::string CheckLevelSet(const LevelSetSource& source, bool allow_unknown_flags) {
+std::string CheckLevelSet(const LevelSetSource& source, bool allow_unknown_flags,
+                          const PieceRunner& run = {}) {
   if (!allow_unknown_flags && (source.flags & ~kKnownLevelSetFlags) != 0) {
     return StrCat("unknown flag bits ", source.flags & ~kKnownLevelSetFlags);
   }
@@ -328,18 +329,25 @@ std::string CheckLevelSet(const LevelSetSource& source, bool allow_unknown_flags
                   ")");
   }
   const bool rigid = (source.flags & kLevelSetFlagRigid) != 0;
-  for (size_t l = 0; l < source.levels.size(); ++l) {
+  // Levels are checked independently, each as a piece; the first level's problem is the
+  // one reported, whatever order they ran in.
+  std::vector<std::string> problems(source.levels.size());
+  RunPieces(run, static_cast<int>(source.levels.size()), [&](int piece) {
+    const auto l = static_cast<size_t>(piece);
     const LevelSource& level = source.levels[l];
-    problem = CheckKeptJoints(l, source.parents.size(), level.kept_joints);
-    if (problem.empty()) {
-      problem = CheckJointMap(l, source.parents, level.kept_joints, level.joint_map);
+    std::string& level_problem = problems[l];
+    level_problem = CheckKeptJoints(l, source.parents.size(), level.kept_joints);
+    if (level_problem.empty()) {
+      level_problem = CheckJointMap(l, source.parents, level.kept_joints, level.joint_map);
     }
-    if (problem.empty()) problem = CheckFigures(l, level.figures);
-    if (problem.empty()) {
-      problem =
+    if (level_problem.empty()) level_problem = CheckFigures(l, level.figures);
+    if (level_problem.empty()) {
+      level_problem =
           CheckMatrices(l, source.frame_count, level.kept_joints.size(), rigid, level.matrices);
     }
-    if (!problem.empty()) return problem;
+  });
+  for (std::string& level_problem : problems) {
+    if (!level_problem.empty()) return std::move(level_problem);
   }
   return {};
 }
@@ -774,8 +782,8 @@ StatusOr<LevelSetView> LevelSetDecoder::Decode(std::span<const std::byte> bytes,
 // -----------------------------------------------------------------------------------
 // Public entry points.
 
-Status ValidateLevelSet(const LevelSetData& data) {
-  std::string problem = CheckLevelSet(SourceOf(data), /*allow_unknown_flags=*/false);
+Status ValidateLevelSet(const LevelSetData& data, const PieceRunner& run) {
+  std::string problem = CheckLevelSet(SourceOf(data), /*allow_unknown_flags=*/false, run);
   if (!problem.empty()) return InvalidArgument(std::move(problem));
   return Status::Ok();
 }
@@ -809,8 +817,8 @@ size_t EncodedLevelSetSize(const LevelSetData& data) {
   return static_cast<size_t>(PlanLayout(SourceOf(data), WriterOptions{}).file_size);
 }
 
-StatusOr<std::string> EncodeLevelSet(const LevelSetData& data) {
-  return internal::EncodeLevelSetWithOptions(data, WriterOptions{});
+StatusOr<std::string> EncodeLevelSet(const LevelSetData& data, const PieceRunner& run) {
+  return internal::EncodeLevelSetWithOptions(data, WriterOptions{}, run);
 }
 
 StatusOr<size_t> EncodeLevelSetInto(const LevelSetData& data, std::span<std::byte> out) {
@@ -870,8 +878,9 @@ LevelSetData ToLevelSetData(const LevelSetView& view) {
 namespace internal {
 
 StatusOr<std::string> EncodeLevelSetWithOptions(const LevelSetData& data,
-                                                const WriterOptions& options) {
-  Status status = ValidateLevelSet(data);
+                                                const WriterOptions& options,
+                                                const PieceRunner& run) {
+  Status status = ValidateLevelSet(data, run);
   if (!status.ok()) return status;
   return EncodeSource(SourceOf(data), options);
 }

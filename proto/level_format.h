@@ -27,6 +27,7 @@
 #include <string_view>
 #include <vector>
 
+#include "base/pieces.h"
 #include "base/status.h"
 #include "proto/aligned_bytes.h"
 
@@ -107,8 +108,9 @@ struct LevelSetData {
 
 // Checks every field combination of `data` against the rules of
 // docs/level-format.md ("Validation"); the message names the first offending level,
-// joint, slot or frame. kInvalidArgument when invalid.
-Status ValidateLevelSet(const LevelSetData& data);
+// joint, slot or frame. kInvalidArgument when invalid. `run`: where the levels' checks
+// run (base/pieces.h; the result is the same).
+Status ValidateLevelSet(const LevelSetData& data, const PieceRunner& run = {});
 
 // The joint map of a level: for each of the n joints, the slot of its nearest kept
 // ancestor (itself when kept). kInvalidArgument when the parents are not topological
@@ -120,9 +122,10 @@ StatusOr<std::vector<uint16_t>> ComputeJointMap(std::span<const int32_t> parents
 // worst-case bound to size a caller-owned buffer). Does not validate.
 size_t EncodedLevelSetSize(const LevelSetData& data);
 
-// Validates `data`, then writes it. The string holds the whole file; decode it in place
-// only where its storage is 16-byte aligned (AlignedBytes::CopyOf otherwise).
-StatusOr<std::string> EncodeLevelSet(const LevelSetData& data);
+// Validates `data` (on `run`, as ValidateLevelSet), then writes it. The string holds the
+// whole file; decode it in place only where its storage is 16-byte aligned
+// (AlignedBytes::CopyOf otherwise).
+StatusOr<std::string> EncodeLevelSet(const LevelSetData& data, const PieceRunner& run = {});
 
 // Validates `data`, then writes it into the first EncodedLevelSetSize(data) bytes of
 // `out` (any alignment) and returns that size. kInvalidArgument when `out` is smaller;

@@ -79,8 +79,9 @@ struct WriterOptions {
   std::vector<ExtraSection> extra_sections;       // appended after the known sections
 };
 
-// Validates `data` (ValidateLevelSet), then writes it as `options` say.
+// Validates `data` (ValidateLevelSet, on `run`), then writes it as `options` say.
 StatusOr<std::string> EncodeLevelSetWithOptions(const LevelSetData& data,
-                                                const WriterOptions& options);
+                                                const WriterOptions& options,
+                                                const PieceRunner& run = {});
 
 }  // namespace motionlod::proto::internal

@@ -426,6 +426,21 @@ TEST(ValidateLevelSet, RejectsReflectionInRigidLevelSet) {
   EXPECT_THAT(ValidateLevelSet(data).message(), HasSubstr("flagged rigid"));
 }
 
+// Levels are checked as independent pieces (on the bake's threads): whatever order they
+// run in, the problem reported is the first level's, as in a serial check.
+TEST(ValidateLevelSet, ReportsTheFirstBadLevelWhateverOrderLevelsAreCheckedIn) {
+  LevelSetData data = MakeSample();
+  data.levels[1].matrices[3] = std::numeric_limits<float>::infinity();
+  data.levels[2].matrices[5] = std::numeric_limits<float>::quiet_NaN();
+  const PieceRunner backwards = [](int count, const std::function<void(int)>& piece) {
+    for (int index = count - 1; index >= 0; --index) piece(index);
+  };
+  const Status serial = ValidateLevelSet(data);
+  EXPECT_THAT(serial.message(), HasSubstr("level 1: K'(frame 0, slot 0) element 3"));
+  EXPECT_EQ(ValidateLevelSet(data, backwards).message(), serial.message());
+  EXPECT_EQ(EncodeLevelSet(data, backwards).status().message(), serial.message());
+}
+
 TEST(EncodeLevelSet, RejectsNanMatrix) {
   LevelSetData data = MakeSample();
   data.levels[0].matrices[7] = std::numeric_limits<float>::quiet_NaN();
