@@ -243,7 +243,7 @@ StatusOr<Stages> BakeEveryLevel(const core::RawCharacter& raw, const io::Asset& 
   stages.inputs = SecondsSince(begin);
 
   begin = Clock::now();
-  auto ranking = core::RankJointsJob{character->get(), &*motion, {}}.Run();
+  auto ranking = core::RankJointsJob{character->get(), &*motion, {}}.Run(pool.Runner());
   if (!ranking.ok()) return ranking.status();
   stages.rank = SecondsSince(begin);
 

@@ -40,7 +40,7 @@ Status RankJointsJob::Validate() const {
   return Status::Ok();
 }
 
-StatusOr<JointRanking> RankJointsJob::Run() const {
+StatusOr<JointRanking> RankJointsJob::Run(const PieceRunner& run) const {
   if (Status status = Validate(); !status.ok()) return status;
   const Character& c = *character;
   const RawSkeleton& s = c.skeleton();
@@ -52,36 +52,39 @@ StatusOr<JointRanking> RankJointsJob::Run() const {
   ranking.rotational.assign(n, 0.0);
   ranking.priority.assign(n, 0.0);
 
-  std::vector<Eigen::Quaterniond> rotations(frames);
-  std::vector<Vec3d> translations(frames);
-  for (int j = 0; j < n; ++j) {
-    const int parent = s.parents[j];
-    const Affine34d bind_local =
-        parent < 0 ? s.bind_world[j] : ComposeAffine(InverseAffine(s.bind_world[parent]), s.bind_world[j]);
-    const Eigen::Quaterniond bind_rotation = RotationOf(bind_local);
-    Eigen::Vector4d sum = Eigen::Vector4d::Zero();
-    for (int t = 0; t < frames; ++t) {
-      const Affine34d local = parent < 0 ? motion->world(t, j)
-                                         : ComposeAffine(InverseAffine(motion->world(t, parent)),
-                                                         motion->world(t, j));
-      rotations[t] = RotationOf(local);
-      translations[t] = local.col(3);
-      // Align signs with the bind rotation so q and -q average together.
-      if (rotations[t].dot(bind_rotation) < 0) rotations[t].coeffs() *= -1.0;
-      sum += rotations[t].coeffs();
+  constexpr int kJointsPerPiece = 4;
+  RunPieces(run, (n + kJointsPerPiece - 1) / kJointsPerPiece, [&](int piece) {
+    std::vector<Eigen::Quaterniond> rotations(frames);
+    std::vector<Vec3d> translations(frames);
+    for (int j = piece * kJointsPerPiece; j < std::min(n, (piece + 1) * kJointsPerPiece); ++j) {
+      const int parent = s.parents[j];
+      const Affine34d bind_local =
+          parent < 0 ? s.bind_world[j] : ComposeAffine(InverseAffine(s.bind_world[parent]), s.bind_world[j]);
+      const Eigen::Quaterniond bind_rotation = RotationOf(bind_local);
+      Eigen::Vector4d sum = Eigen::Vector4d::Zero();
+      for (int t = 0; t < frames; ++t) {
+        const Affine34d local = parent < 0 ? motion->world(t, j)
+                                           : ComposeAffine(InverseAffine(motion->world(t, parent)),
+                                                           motion->world(t, j));
+        rotations[t] = RotationOf(local);
+        translations[t] = local.col(3);
+        // Align signs with the bind rotation so q and -q average together.
+        if (rotations[t].dot(bind_rotation) < 0) rotations[t].coeffs() *= -1.0;
+        sum += rotations[t].coeffs();
+      }
+      Eigen::Quaterniond mean(bind_rotation);
+      if (sum.norm() > 0) mean.coeffs() = sum.normalized();
+      const double translation_scale = std::max(ranking.hierarchical[j], 0.01 * c.height());
+      double variation = 0, offset = 0, translation = 0;
+      for (int t = 0; t < frames; ++t) {
+        variation += Angle(rotations[t], mean);
+        offset += Angle(rotations[t], bind_rotation);
+        translation += (translations[t] - bind_local.col(3)).norm() / translation_scale;
+      }
+      ranking.rotational[j] = (variation + offset + translation) / frames;
+      ranking.priority[j] = ranking.hierarchical[j] * ranking.rotational[j];
     }
-    Eigen::Quaterniond mean(bind_rotation);
-    if (sum.norm() > 0) mean.coeffs() = sum.normalized();
-    const double translation_scale = std::max(ranking.hierarchical[j], 0.01 * c.height());
-    double variation = 0, offset = 0, translation = 0;
-    for (int t = 0; t < frames; ++t) {
-      variation += Angle(rotations[t], mean);
-      offset += Angle(rotations[t], bind_rotation);
-      translation += (translations[t] - bind_local.col(3)).norm() / translation_scale;
-    }
-    ranking.rotational[j] = (variation + offset + translation) / frames;
-    ranking.priority[j] = ranking.hierarchical[j] * ranking.rotational[j];
-  }
+  });
 
   std::vector<int> depth(n, 0);
   for (int j = 1; j < n; ++j) depth[j] = depth[s.parents[j]] + 1;

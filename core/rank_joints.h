@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "base/pieces.h"
 #include "base/status.h"
 #include "core/character.h"
 #include "core/motion.h"
@@ -39,7 +40,9 @@ struct RankJointsJob {
   std::span<const std::string> locked_joints;  // names; never removed
 
   Status Validate() const;  // unknown locked names are an error naming them
-  StatusOr<JointRanking> Run() const;
+  // `run`: where the joints' rotational factors are measured, a few joints per piece
+  // (base/pieces.h); the ranking is the same for any runner.
+  StatusOr<JointRanking> Run(const PieceRunner& run = {}) const;
 };
 
 }  // namespace motionlod::core

@@ -237,7 +237,7 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
       2,
       [&](int task) {
         if (task == 0) {
-          ranked = core::RankJointsJob{&character, &motion, request.locked_joints}.Run();
+          ranked = core::RankJointsJob{&character, &motion, request.locked_joints}.Run(pool.Runner());
           ranking_done = true;
         } else {
           created = core::PreparedMotion::Create(inputs->character, motion, request.settings,

@@ -9,6 +9,8 @@
 #include <vector>
 
 #include "core/character.h"
+#include "core/rank_joints.h"
+#include "pipeline/bake.h"
 #include "io/asset.h"
 
 namespace motionlod {
@@ -101,6 +103,28 @@ TEST(TaskPool, BuildsTheSameCharacterAsOneThread) {
       EXPECT_EQ(a.position_moment, b.position_moment) << file << " pair " << q;
       EXPECT_EQ(a.normal_moment, b.normal_moment) << file << " pair " << q;
     }
+  }
+}
+
+// The ranking's pieces on a pool give the ranking of one thread, to the bit.
+TEST(TaskPool, RanksTheSameAsOneThread) {
+  const std::filesystem::path data = MOTIONLOD_SHARED_DATA;
+  if (!std::filesystem::exists(data / "MANIFEST.md")) GTEST_SKIP() << "../shared/data is absent";
+  TaskPool pool(2);
+  for (const char* file : {"motions/55_01_cmu.fbx", "characters/RobotExpressive.glb"}) {
+    auto asset = io::LoadAssetFile(data / file);
+    ASSERT_TRUE(asset.ok()) << file;
+    pipeline::BakeRequest request;
+    request.character = *asset;
+    request.threads = 1;
+    const auto inputs = pipeline::PrepareInputs(request);
+    ASSERT_TRUE(inputs.ok()) << file;
+    const core::RankJointsJob job{inputs->character.get(), &inputs->motion, {}};
+    const auto one = *job.Run();
+    const auto split = *job.Run(pool.Runner());
+    EXPECT_EQ(split.rotational, one.rotational) << file;
+    EXPECT_EQ(split.priority, one.priority) << file;
+    EXPECT_EQ(split.removal_order, one.removal_order) << file;
   }
 }
 

@@ -289,6 +289,8 @@ TEST(LevelFormat, EncodeIntoCallerBufferWritesTheSameBytes) {
   const LevelSetData data = MakeSample();
   const std::string encoded = EncodeLevelSet(data).value();
   AlignedBytes out(EncodedLevelSetSize(data) + 5);
+  // A used buffer: the padding and reserved fields must still come out zero.
+  std::fill(out.mutable_bytes().begin(), out.mutable_bytes().end(), std::byte{0xAB});
   StatusOr<size_t> written = EncodeLevelSetInto(data, out.mutable_bytes());
   ASSERT_TRUE(written.ok()) << written.status().ToString();
   ASSERT_EQ(*written, encoded.size());
