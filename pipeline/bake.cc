@@ -106,7 +106,11 @@ Status BakeRequest::Validate() const {
   if (!(smallest_useful_error_pct > 0)) {
     return InvalidArgument("smallest_useful_error_pct must be positive");
   }
-  if (threads < 0) return InvalidArgument("threads must be >= 0 (0 = one per hardware thread)");
+  // Bake starts its pool's threads up front.
+  if (threads < 0 || threads > kMaxThreads) {
+    return InvalidArgument("threads must be in [0, " + std::to_string(kMaxThreads) +
+                           "] (0 = one per hardware thread)");
+  }
   return Status::Ok();
 }
 

@@ -40,7 +40,8 @@ struct BakeRequest {
   double smallest_useful_error_pct = 10.0;
   // Also solve the four variants at every level (errors only) for the fig. 7 plot.
   bool variant_curves = false;
-  int threads = 0;  // 0 = one per hardware thread
+  static constexpr int kMaxThreads = 256;
+  int threads = 0;  // 0 = one per hardware thread; at most kMaxThreads
   // Time one plain skinning pass after the bake for the report's
   // timing.skinning_pass_seconds and bake_over_skinning_pass (both 0 when false): it
   // costs a sixth to a third of the bake again, outside bake_seconds.

@@ -138,6 +138,7 @@ TEST_F(Cli, BadInputExitsWithTwoAndWritesNothing) {
       {"bake " + Sample() + " --animation Nope --out " + out.string(), "Nope"},
       {"bake " + Sample() + " --lock NoSuchJoint --out " + out.string(), "NoSuchJoint"},
       {"bake " + Sample() + " --fps -3 --out " + out.string(), "fps"},
+      {"bake " + Sample() + " --threads 100000 --out " + out.string(), "threads must be in [0, 256]"},
       {"bake " + Sample(), "--out"},
       {"plot " + truncated.string() + " -o " + (dir_ / "x.svg").string(), "not valid JSON"},
   };
