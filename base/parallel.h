@@ -39,7 +39,7 @@ class TaskPool {
       std::lock_guard<std::mutex> lock(mutex_);
       stopping_ = true;
     }
-    work_.notify_all();
+    changed_.notify_all();
     for (std::thread& worker : workers_) worker.join();
   }
   TaskPool(const TaskPool&) = delete;
@@ -56,7 +56,9 @@ class TaskPool {
   // are handed out in order, to the workers and to the calling thread; on_done(done) runs
   // on the calling thread, serially, after pieces complete (done: how many so far, each
   // value once, up to count). Safe to call from several threads at once and from inside a
-  // piece: a caller only ever waits for its own pieces that other threads are running.
+  // piece. A caller whose own pieces are all handed out helps with other open jobs while
+  // the last of its pieces finish elsewhere: a job opened inside a piece (the motion's
+  // sampling, inside the inputs' task) would otherwise wait for its one busy owner.
   void Run(int count, const std::function<void(int)>& piece,
            const std::function<void(int)>& on_done = {}) {
     if (count <= 0) return;
@@ -70,16 +72,19 @@ class TaskPool {
     Job job(&piece, count);
     std::unique_lock<std::mutex> lock(mutex_);
     open_.push_back(&job);
-    work_.notify_all();
+    changed_.notify_all();
     int reported = 0;
-    while (true) {
+    while (reported < count) {
       if (job.next < count) {
         RunPiece(job, lock);
       } else if (job.done == reported) {
-        if (reported == count) break;
-        job.progress.wait(lock, [&] { return job.done > reported; });
+        if (open_.empty()) {
+          changed_.wait(lock);
+        } else {
+          RunPiece(*open_.front(), lock);
+        }
       }
-      while (reported < job.done) {
+      if (reported < job.done) {
         const int done = job.done;
         if (on_done) {
           lock.unlock();
@@ -98,7 +103,6 @@ class TaskPool {
     int count;
     int next = 0;  // the next piece to hand out
     int done = 0;  // pieces finished
-    std::condition_variable progress;  // done changed
   };
 
   // Takes the job's next piece and runs it with the lock released. Called with the lock
@@ -110,13 +114,13 @@ class TaskPool {
     (*job.piece)(index);
     lock.lock();
     ++job.done;
-    job.progress.notify_one();
+    changed_.notify_all();
   }
 
   void Work() {
     std::unique_lock<std::mutex> lock(mutex_);
     while (true) {
-      work_.wait(lock, [&] { return stopping_ || !open_.empty(); });
+      changed_.wait(lock, [&] { return stopping_ || !open_.empty(); });
       if (open_.empty()) return;  // stopping, nothing left
       RunPiece(*open_.front(), lock);
     }
@@ -124,7 +128,8 @@ class TaskPool {
 
   const int threads_;
   std::mutex mutex_;
-  std::condition_variable work_;  // a job was opened, or the pool is stopping
+  // A job was opened, a piece finished, or the pool is stopping.
+  std::condition_variable changed_;
   std::deque<Job*> open_;         // jobs with pieces not yet handed out, oldest first
   bool stopping_ = false;
   std::vector<std::thread> workers_;

@@ -16,6 +16,15 @@
 namespace motionlod {
 namespace {
 
+// Waits up to 30 s for `condition`; whether it came true.
+template <typename Condition>
+bool WaitFor(Condition&& condition) {
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+  while (!condition() && std::chrono::steady_clock::now() < deadline) std::this_thread::yield();
+  return condition();
+}
+
+
 TEST(TaskPool, RunsEveryPieceOnceAndReportsEachCountInOrder) {
   for (int threads : {1, 2, 4}) {
     TaskPool pool(threads);
@@ -49,9 +58,29 @@ TEST(TaskPool, PiecesRunAtTheSameTime) {
   std::atomic<int> met{0};
   pool.Run(2, [&](int) {
     ++started;
-    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
-    while (started.load() < 2 && std::chrono::steady_clock::now() < deadline) std::this_thread::yield();
-    if (started.load() == 2) ++met;
+    if (WaitFor([&] { return started.load() == 2; })) ++met;
+  });
+  EXPECT_EQ(met.load(), 2);
+}
+
+// The worker runs an outer piece that opens a job of two pieces which wait for each other;
+// the caller, its own pieces handed out, must take the second: a caller that only waited
+// for its own job would leave that job to its one busy owner.
+TEST(TaskPool, AWaitingCallerHelpsWithAJobOpenedInsideAPiece) {
+  TaskPool pool(2);
+  std::atomic<bool> outer_started{false};
+  std::atomic<int> inner_started{0};
+  std::atomic<int> met{0};
+  pool.Run(2, [&](int outer) {
+    if (outer == 0) {
+      WaitFor([&] { return outer_started.load(); });  // the worker holds piece 1
+      return;
+    }
+    outer_started = true;
+    pool.Run(2, [&](int) {
+      ++inner_started;
+      if (WaitFor([&] { return inner_started.load() == 2; })) ++met;
+    });
   });
   EXPECT_EQ(met.load(), 2);
 }
