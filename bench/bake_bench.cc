@@ -259,23 +259,9 @@ StatusOr<Stages> BakeEveryLevel(const core::RawCharacter& raw, const io::Asset& 
   const int n = (*character)->joint_count();
   std::vector<int> counts;
   for (int count = n; count >= ranking->locked_count; --count) counts.push_back(count);
-  std::vector<std::optional<core::LevelResult>> results(counts.size());
-  std::vector<Status> errors(counts.size());
-  pool.Run(static_cast<int>(counts.size()), [&](int index) {
-    auto level = core::ReduceSkeletonToCount(**character, *ranking, counts[index]);
-    if (!level.ok()) {
-      errors[index] = level.status();
-      return;
-    }
-    auto result = (*prepared)->SolveLevel(*level);
-    if (!result.ok()) {
-      errors[index] = result.status();
-      return;
-    }
-    results[index] = std::move(*result);
-  });
-  for (const Status& status : errors) {
-    if (!status.ok()) return status;
+  std::map<int, core::LevelResult> results;
+  if (Status status = pipeline::SolveLevels(*prepared, *ranking, counts, pool, results); !status.ok()) {
+    return status;
   }
   stages.solve = SecondsSince(begin);
 
@@ -290,9 +276,9 @@ StatusOr<Stages> BakeEveryLevel(const core::RawCharacter& raw, const io::Asset& 
   data.joint_names = (*character)->skeleton().joint_names;
   data.parents.assign((*character)->skeleton().parents.begin(),
                       (*character)->skeleton().parents.end());
-  data.levels.resize(results.size());
-  pool.Run(static_cast<int>(results.size()),
-           [&](int index) { data.levels[index] = pipeline::LevelDataOf(*results[index]); });
+  data.levels.resize(counts.size());
+  pool.Run(static_cast<int>(counts.size()),
+           [&](int index) { data.levels[index] = pipeline::LevelDataOf(results.at(counts[index])); });
   auto encoded = proto::EncodeLevelSet(data, pool.Runner());
   if (!encoded.ok()) return encoded.status();
   benchmark::DoNotOptimize(encoded->data());
@@ -563,9 +549,11 @@ void RegisterAll(const Options& options, const std::vector<std::unique_ptr<Case>
 // --breakdown: where the time of the levels goes, stage by stage, on one thread, median of
 // 5 runs per figure, as markdown rows. SolveLevel is split from outside the core:
 //   LS      SolveLeastSquares (G and B, Cholesky, the 3T right-hand sides)
-//   errors  SolveLevel(vp or vpno) - LS: the optimised and baseline errors (quadratic
-//           forms, exact maximum vertex error, sampled figures) and the float copy
-//   PD      SolveLevel(+pd) - SolveLevel(without): polar projection, translation re-solve
+//   errors     SolveOptimized(vp or vpno) - LS: the optimised errors (quadratic forms,
+//              exact maximum vertex error, sampled figures) and the float copy
+//   baselines  every level's baseline errors, one from the other (BaselineSequence)
+//   PD         SolveOptimized(+pd) - SolveOptimized(without): polar projection, translation
+//              re-solve
 // Default ladder: n, ~3n/4, ~n/2, ~n/4 (the smallest useful level and the bisection probes
 // that find it are left out; the benchmark's bake/ cases include them).
 template <typename F>
@@ -582,9 +570,9 @@ double MedianSeconds(int runs, F&& fn) {
 
 void PrintBreakdownHeader() {
   std::printf(
-      "| case | fit | p | n | T | levels | skin ms | inputs | rank | prepare | LS | errors | PD "
-      "| sum without PD (x skin) | sum with PD (x skin) |\n"
-      "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+      "| case | fit | p | n | T | levels | skin ms | inputs | rank | prepare | LS | errors | baselines "
+      "| PD | sum without PD (x skin) | sum with PD (x skin) |\n"
+      "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
 }
 
 void PrintBreakdown(const std::string& label, const Case& c,
@@ -629,18 +617,27 @@ void PrintBreakdown(const std::string& label, const Case& c,
     core::SolveSettings settings;
     settings.variant = fit;
     std::shared_ptr<const core::PreparedMotion> prepared_fit, prepared_rigid;
+    const auto workload = every_level ? core::PreparedMotion::Workload::kEveryLevel
+                                      : core::PreparedMotion::Workload::kSomeLevels;
     const double prepare = MedianSeconds(runs, [&] {
-      prepared_fit = *core::PreparedMotion::Create(built, motion, settings);
+      prepared_fit = *core::PreparedMotion::Create(built, motion, settings, workload);
     });
     settings.variant = rigid;
-    prepared_rigid = *core::PreparedMotion::Create(built, motion, settings);
+    prepared_rigid = *core::PreparedMotion::Create(built, motion, settings, workload);
     double ls = 0, level_fit = 0, level_rigid = 0;
     std::string per_level;
-    for (int count : counts) {
-      auto reduced = *core::ReduceSkeletonToCount(character, *ranking, count);
+    std::vector<core::ReducedSkeleton> levels;
+    for (int count : counts) levels.push_back(*core::ReduceSkeletonToCount(character, *ranking, count));
+    const double baselines = MedianSeconds(runs, [&] {
+      core::BaselineSequence sequence(prepared_fit);
+      for (const core::ReducedSkeleton& level : levels) benchmark::DoNotOptimize(sequence.Next(level).ok());
+    });
+    for (size_t index = 0; index < counts.size(); ++index) {
+      const int count = counts[index];
+      const core::ReducedSkeleton& reduced = levels[index];
       const double ls_one = MedianSeconds(runs, [&] { benchmark::DoNotOptimize(prepared_fit->SolveLeastSquares(reduced).ok()); });
-      const double fit_one = MedianSeconds(runs, [&] { benchmark::DoNotOptimize(prepared_fit->SolveLevel(reduced).ok()); });
-      const double rigid_one = MedianSeconds(runs, [&] { benchmark::DoNotOptimize(prepared_rigid->SolveLevel(reduced).ok()); });
+      const double fit_one = MedianSeconds(runs, [&] { benchmark::DoNotOptimize(prepared_fit->SolveOptimized(reduced).ok()); });
+      const double rigid_one = MedianSeconds(runs, [&] { benchmark::DoNotOptimize(prepared_rigid->SolveOptimized(reduced).ok()); });
       ls += ls_one;
       level_fit += fit_one;
       level_rigid += rigid_one;
@@ -649,15 +646,15 @@ void PrintBreakdown(const std::string& label, const Case& c,
                     1e3 * (fit_one - ls_one), 1e3 * (rigid_one - fit_one));
       per_level += buffer;
     }
-    const double without = inputs + rank + prepare + level_fit;
-    const double with = inputs + rank + prepare + level_rigid;
+    const double without = inputs + rank + prepare + level_fit + baselines;
+    const double with = inputs + rank + prepare + level_rigid + baselines;
     std::printf(
-        "| `%s` | %s | %d | %d | %d | %zu | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f | %.1f (%.1fx) "
-        "| %.1f (%.1fx) |\n",
+        "| `%s` | %s | %d | %d | %d | %zu | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f "
+        "| %.1f (%.1fx) | %.1f (%.1fx) |\n",
         label.c_str(), core::VariantName(fit), character.vertex_count(), n, motion.frame_count,
         counts.size(), 1e3 * skin, 1e3 * inputs, 1e3 * rank, 1e3 * prepare, 1e3 * ls,
-        1e3 * (level_fit - ls), 1e3 * (level_rigid - level_fit), 1e3 * without, without / skin,
-        1e3 * with, with / skin);
+        1e3 * (level_fit - ls), 1e3 * baselines, 1e3 * (level_rigid - level_fit), 1e3 * without,
+        without / skin, 1e3 * with, with / skin);
     if (options.per_level) std::printf("    per level (kept: LS / errors / PD ms):%s\n", per_level.c_str());
     std::fflush(stdout);
   }

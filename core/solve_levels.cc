@@ -5,6 +5,7 @@
 #include <limits>
 #include <numeric>
 #include <optional>
+#include <tuple>
 
 #include "base/hash.h"
 #include "core/block_cholesky.h"
@@ -123,13 +124,30 @@ struct PreparedMotion::Impl {
     }
     // Frame t's Delta_k^T stacked: 4n x 3, block (4k, 0) = Delta_k(t)^T.
     void Frame(int t, Eigen::Matrix<double, Eigen::Dynamic, 3>& out) const;
+    // The same for the listed joints only; the other blocks are left as they are.
+    void Frame(int t, const std::vector<int>& joints, Eigen::Matrix<double, Eigen::Dynamic, 3>& out) const {
+      for (int k : joints) out.block<4, 3>(4 * k, 0) = At(k, t).transpose();
+    }
   };
-  // The per-frame bounds of the maximum search (see MaxVertexError).
+  // The baseline's Delta_k = K_kept(phi(k)) - K_k of a validated level.
+  DeltaView BaselineDelta(const ReducedSkeleton& level) const;
+  // The per-frame bounds of the maximum search (see MaxVertexError), over a set of vertex
+  // groups: the others' bounds stay 0, so the search never visits them.
   struct MaxSearchBounds {
+    std::vector<int> groups;          // the groups bounded (nonempty ones)
+    std::vector<int> joints;          // the joints that weight them (their Delta is read)
     std::vector<Vec3d> column_norms;  // T x n: column norms of Delta_k(t)'s 3x3 part
     std::vector<double> group_bound;  // T x n: bound of group j's vertices in frame t
     std::vector<double> frame_bound;  // T
     std::vector<double> joint_bound;  // scratch, n
+  };
+  // Bounds of every nonempty group, or (group_mask) of the groups it flags, for T frames.
+  MaxSearchBounds MakeMaxSearchBounds(const std::vector<uint8_t>* group_mask) const;
+  // Where a maximum search starts: the largest |d_i(t)|^2 known (in float, as the search
+  // compares them) and where it is.
+  struct MaxSearchStart {
+    float best_squared = 0;
+    int frame = 0, vertex = 0;
   };
 
   enum class Figures {
@@ -145,6 +163,15 @@ struct PreparedMotion::Impl {
                       LevelErrors& out,
                       double decide_within = std::numeric_limits<double>::infinity()) const;
   std::vector<size_t> ActivePairs(const DeltaView& delta) const;
+  // Joint pair q's terms of the vertex parts of Ep and En in a frame (4n x 3, Delta_k^T
+  // stacked): tr(Delta_k^T Cp_kl Delta_l) and tr(Delta_k^T Cn_kl Delta_l), doubled for k != l.
+  std::pair<double, double> PairTerms(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame, size_t q) const {
+    const auto [k, l] = pairs[q];
+    const Eigen::Matrix<double, 4, 3> dk = frame.block<4, 3>(4 * k, 0);
+    const Eigen::Matrix<double, 4, 3> dl = frame.block<4, 3>(4 * l, 0);
+    return {dk.cwiseProduct(pair_cp[q] * dl).sum(),
+            dk.topRows<3>().cwiseProduct(pair_cn[q] * dl.topRows<3>()).sum()};
+  }
   // A level's quadratic forms in its kept joints' space. With Delta_k = X_s - K_k, s = phi(k),
   //   sum_kl tr(Delta_k^T C_kl Delta_l) = sum_su tr(X_s^T G_su X_u) - 2 sum_k tr(X_s^T F_k)
   //                                       + tr(K^T C K),   G_su = sum_{phi(k)=s, phi(l)=u} C_kl,
@@ -174,21 +201,40 @@ struct PreparedMotion::Impl {
                             const std::vector<int>& kept, int t, LevelErrors& out) const;
   void FrameBounds(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame, int t,
                    MaxSearchBounds& bounds) const;
-  void MaxVertexError(const DeltaView& delta, const MaxSearchBounds& bounds, double decide_within,
-                      LevelErrors& out) const;
+  // The search starts from `start` (a value some vertex attains) and evaluates only the
+  // clusters that cluster_mask flags (nullptr: every cluster).
+  // Returns where it ended, the start of a later search.
+  MaxSearchStart MaxVertexError(const DeltaView& delta, const MaxSearchBounds& bounds,
+                                double decide_within, const MaxSearchStart& start,
+                                const std::vector<uint8_t>* cluster_mask, LevelErrors& out) const;
+  // Per sampled vertex of one sampled frame: |v - v'|^2, the normals' angle (radians) and
+  // |n - n'|^2, in rows of |vertices|.
+  struct SampleValues {
+    std::vector<double> distance_squared, angle, normal_squared;
+    explicit SampleValues(size_t count = 0) : distance_squared(count), angle(count), normal_squared(count) {}
+  };
   // Area-weighted sums over the sample of |v - v'|, |v - v'|^2, the normals' angle and
   // |n - n'|^2.
   struct SampleSums {
     double distance = 0, distance_squared = 0, angle = 0, normal_squared = 0;
   };
-  // Scratch of FrameSampledErrors: n matrices, then rows of |vertices|.
+  void AddSampleSums(const SampleValues& values, SampleSums& sums) const;
+  // Scratch of SampleFrameValues: n matrices, then rows of up to |vertices|.
   struct SampleScratch {
     std::vector<PaddedDelta> frame_delta;
-    std::vector<double> distance_squared, normal_x, normal_y, normal_z, angle;
+    std::vector<double> normals, normal_x, normal_y, normal_z, angle;
+    explicit SampleScratch(size_t joints = 0, size_t count = 0)
+        : frame_delta(joints, PaddedDelta::Zero()), normals(4 * count), normal_x(count),
+          normal_y(count), normal_z(count), angle(count) {}
   };
-  // Adds frame t = sample_frames[q]'s vertices to the sums.
-  void FrameSampledErrors(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame, size_t q,
-                          SampleScratch& scratch, SampleSums& sums) const;
+  // The values of sampled frame q = sample_frames index for the sampled vertices listed in
+  // `vertices` (nullptr: every one), written at their own index in `values`.
+  void SampleFrameValues(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame, size_t q,
+                         const std::vector<uint32_t>* vertices, SampleScratch& scratch,
+                         SampleValues& values) const;
+  // The figures that follow from the per-frame parts of E (e, mean_e, max_e, the RMS
+  // error) and, where given, from the sample's sums.
+  void FinishErrors(const SampleSums* sums, LevelErrors& out) const;
 };
 
 namespace {
@@ -447,23 +493,11 @@ void PreparedMotion::Impl::EvaluateErrors(const DeltaView& delta, const std::vec
   const std::optional<KeptForms> kept_forms =
       quadratic ? MakeKeptForms(delta, kept, active_pairs.size()) : std::nullopt;
   Eigen::Matrix<double, Eigen::Dynamic, 3> kept_frame(kept_forms ? 4 * kept.size() : 0, 3);
-  MaxSearchBounds bounds;
-  if (maximum) {
-    bounds.column_norms.resize(static_cast<size_t>(frames) * n);
-    bounds.group_bound.assign(static_cast<size_t>(frames) * n, 0.0);
-    bounds.frame_bound.assign(frames, 0.0);
-    bounds.joint_bound.resize(n);
-  }
+  MaxSearchBounds bounds = maximum ? MakeMaxSearchBounds(nullptr) : MaxSearchBounds{};
   SampleSums sums;
   size_t next_sample = 0;
-  SampleScratch scratch;
-  if (sampled) {
-    scratch.frame_delta.assign(n, PaddedDelta::Zero());
-    for (std::vector<double>* row : {&scratch.distance_squared, &scratch.normal_x, &scratch.normal_y,
-                                     &scratch.normal_z, &scratch.angle}) {
-      row->resize(sample_vertices.size());
-    }
-  }
+  SampleScratch scratch(sampled ? n : 0, sampled ? sample_vertices.size() : 0);
+  SampleValues values(sampled ? sample_vertices.size() : 0);
   Eigen::Matrix<double, Eigen::Dynamic, 3> frame(4 * n, 3);
   for (int t = 0; t < frames; ++t) {
     delta.Frame(t, frame);
@@ -472,35 +506,37 @@ void PreparedMotion::Impl::EvaluateErrors(const DeltaView& delta, const std::vec
     }
     if (maximum) FrameBounds(frame, t, bounds);
     if (sampled && next_sample < sample_frames.size() && sample_frames[next_sample] == t) {
-      FrameSampledErrors(frame, next_sample++, scratch, sums);
+      SampleFrameValues(frame, next_sample++, nullptr, scratch, values);
+      AddSampleSums(values, sums);
     }
   }
-  if (quadratic) {
-    out.mean_e = std::accumulate(out.e.begin(), out.e.end(), 0.0) / frames;
-    const auto max_it = std::max_element(out.e.begin(), out.e.end());
-    out.max_e = *max_it;
-    out.max_e_frame = static_cast<int>(max_it - out.e.begin());
-    const double mean_sq = std::accumulate(out.ep_vertex.begin(), out.ep_vertex.end(), 0.0) / frames;
-    out.rms_vertex_error_pct = 100.0 * std::sqrt(mean_sq) / character->height();
-  }
-  if (maximum) MaxVertexError(delta, bounds, decide_within, out);
-  if (sampled) {
-    // Ratio estimates: the sample's mean scaled by how far its mean square is from the
-    // exact one over every vertex and frame (the quadratic forms). A strided sample that
-    // over- or under-represents where a level's error sits (a hand, a face) gets the scale
-    // right from the exact figure and keeps only the shape (mean over RMS) from the
-    // sample; plain sample means were off by up to 2x on real levels.
-    const double weight = sample_area * static_cast<double>(sample_frames.size());
-    const auto ratio_estimate = [&](double sum, double sum_squared, const std::vector<double>& exact) {
-      const double exact_mean_squared = std::accumulate(exact.begin(), exact.end(), 0.0) / frames;
-      const double mean = sum / weight;
-      return sum_squared > 0 ? mean * std::sqrt(exact_mean_squared / (sum_squared / weight)) : mean;
-    };
-    out.mean_vertex_error_pct =
-        100.0 * ratio_estimate(sums.distance, sums.distance_squared, out.ep_vertex) / character->height();
-    out.mean_normal_error_deg =
-        ratio_estimate(sums.angle, sums.normal_squared, out.en_vertex) * 180.0 / M_PI;
-  }
+  if (maximum) MaxVertexError(delta, bounds, decide_within, MaxSearchStart{}, nullptr, out);
+  if (quadratic) FinishErrors(sampled ? &sums : nullptr, out);
+}
+
+void PreparedMotion::Impl::FinishErrors(const SampleSums* sums, LevelErrors& out) const {
+  out.mean_e = std::accumulate(out.e.begin(), out.e.end(), 0.0) / frames;
+  const auto max_it = std::max_element(out.e.begin(), out.e.end());
+  out.max_e = *max_it;
+  out.max_e_frame = static_cast<int>(max_it - out.e.begin());
+  const double mean_sq = std::accumulate(out.ep_vertex.begin(), out.ep_vertex.end(), 0.0) / frames;
+  out.rms_vertex_error_pct = 100.0 * std::sqrt(mean_sq) / character->height();
+  if (sums == nullptr) return;
+  // Ratio estimates: the sample's mean scaled by how far its mean square is from the
+  // exact one over every vertex and frame (the quadratic forms). A strided sample that
+  // over- or under-represents where a level's error sits (a hand, a face) gets the scale
+  // right from the exact figure and keeps only the shape (mean over RMS) from the
+  // sample; plain sample means were off by up to 2x on real levels.
+  const double weight = sample_area * static_cast<double>(sample_frames.size());
+  const auto ratio_estimate = [&](double sum, double sum_squared, const std::vector<double>& exact) {
+    const double exact_mean_squared = std::accumulate(exact.begin(), exact.end(), 0.0) / frames;
+    const double mean = sum / weight;
+    return sum_squared > 0 ? mean * std::sqrt(exact_mean_squared / (sum_squared / weight)) : mean;
+  };
+  out.mean_vertex_error_pct =
+      100.0 * ratio_estimate(sums->distance, sums->distance_squared, out.ep_vertex) / character->height();
+  out.mean_normal_error_deg =
+      ratio_estimate(sums->angle, sums->normal_squared, out.en_vertex) * 180.0 / M_PI;
 }
 
 std::optional<PreparedMotion::Impl::KeptForms> PreparedMotion::Impl::MakeKeptForms(
@@ -557,11 +593,9 @@ void PreparedMotion::Impl::FrameQuadraticErrors(const Eigen::Matrix<double, Eige
   const auto joint_pairs = [&](double& ep, double& en) {
     ep = en = 0;
     for (size_t q : active_pairs) {
-      const auto [k, l] = pairs[q];
-      const Eigen::Matrix<double, 4, 3> dk = frame.block<4, 3>(4 * k, 0);
-      const Eigen::Matrix<double, 4, 3> dl = frame.block<4, 3>(4 * l, 0);
-      ep += dk.cwiseProduct(pair_cp[q] * dl).sum();
-      en += dk.topRows<3>().cwiseProduct(pair_cn[q] * dl.topRows<3>()).sum();
+      const auto [term_p, term_n] = PairTerms(frame, q);
+      ep += term_p;
+      en += term_n;
     }
   };
   double ep = 0, en = 0;
@@ -631,23 +665,46 @@ double WeightedBound(const Character::MaxInfluence* begin, const Character::MaxI
 
 }  // namespace
 
+PreparedMotion::Impl::MaxSearchBounds PreparedMotion::Impl::MakeMaxSearchBounds(
+    const std::vector<uint8_t>* group_mask) const {
+  const Character& c = *character;
+  const auto& group_clusters = c.group_cluster_offsets();
+  const auto& group_influence_offsets = c.group_influence_offsets();
+  const auto& group_influences = c.group_influences();
+  MaxSearchBounds bounds;
+  std::vector<uint8_t> weights_a_group(n, 0);
+  for (int j = 0; j < n; ++j) {
+    if (group_clusters[j] == group_clusters[j + 1] || (group_mask != nullptr && !(*group_mask)[j])) continue;
+    bounds.groups.push_back(j);
+    for (uint32_t q = group_influence_offsets[j]; q < group_influence_offsets[j + 1]; ++q) {
+      weights_a_group[group_influences[q].joint] = 1;
+    }
+  }
+  for (int k = 0; k < n; ++k) {
+    if (weights_a_group[k]) bounds.joints.push_back(k);
+  }
+  bounds.column_norms.resize(static_cast<size_t>(frames) * n);
+  bounds.group_bound.assign(static_cast<size_t>(frames) * n, 0.0);
+  bounds.frame_bound.assign(frames, 0.0);
+  bounds.joint_bound.resize(n);
+  return bounds;
+}
+
 void PreparedMotion::Impl::FrameBounds(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame, int t,
                                        MaxSearchBounds& bounds) const {
   // Coarse bounds for every group from the joints' own boxes (one box bound per joint); a
   // visited group is refined with its own box.
   const Character& c = *character;
-  const auto& group_clusters = c.group_cluster_offsets();
   const auto& group_influence_offsets = c.group_influence_offsets();
   const auto& group_influences = c.group_influences();
   Vec3d* norms = bounds.column_norms.data() + static_cast<size_t>(t) * n;
-  for (int k = 0; k < n; ++k) {
+  for (int k : bounds.joints) {
     const Affine34d dk = frame.block<4, 3>(4 * k, 0).transpose();
     norms[k] = dk.leftCols<3>().colwise().norm().transpose();
     bounds.joint_bound[k] =
         BoxBound(dk, norms[k], c.joint_vertex_centers()[k], c.joint_vertex_half_extents()[k]);
   }
-  for (int j = 0; j < n; ++j) {
-    if (group_clusters[j] == group_clusters[j + 1]) continue;
+  for (int j : bounds.groups) {
     const double u = WeightedBound(group_influences.data() + group_influence_offsets[j],
                                    group_influences.data() + group_influence_offsets[j + 1],
                                    [&](int g) { return bounds.joint_bound[g]; });
@@ -656,8 +713,9 @@ void PreparedMotion::Impl::FrameBounds(const Eigen::Matrix<double, Eigen::Dynami
   }
 }
 
-void PreparedMotion::Impl::MaxVertexError(const DeltaView& delta, const MaxSearchBounds& bounds,
-                                          double decide_within, LevelErrors& out) const {
+PreparedMotion::Impl::MaxSearchStart PreparedMotion::Impl::MaxVertexError(
+    const DeltaView& delta, const MaxSearchBounds& bounds, double decide_within,
+    const MaxSearchStart& start, const std::vector<uint8_t>* cluster_mask, LevelErrors& out) const {
   // Exact maximum of |d_i(t)|, d_i(t) = sum_g w_ig Delta_g(t) [v0_i; 1], over all vertices
   // and frames without evaluating most of them. For a box with center c and half extents
   // h in the bind pose, every vertex v in it has
@@ -692,9 +750,9 @@ void PreparedMotion::Impl::MaxVertexError(const DeltaView& delta, const MaxSearc
   std::sort(frame_order.begin(), frame_order.end(),
             [&](int a, int b) { return bounds.frame_bound[a] > bounds.frame_bound[b]; });
 
-  double best = 0;
-  float best_squared = 0;  // the float |d_i|^2 whose root is `best`
-  int best_frame = 0, best_vertex = 0;
+  float best_squared = start.best_squared;  // the float |d_i|^2 whose root is `best`
+  double best = std::sqrt(static_cast<double>(best_squared));
+  int best_frame = start.frame, best_vertex = start.vertex;
   // Nothing at or below `floor` is refined: negligible, or within the decision's bound.
   const double floor = std::max(kNegligible * c.height(), std::isfinite(decide_within) ? decide_within : 0.0);
   // The exact evaluations blend in float (the skin's own precision): twice the throughput,
@@ -707,7 +765,7 @@ void PreparedMotion::Impl::MaxVertexError(const DeltaView& delta, const MaxSearc
   const auto search = [&] {
     for (int t : frame_order) {
       if (bounds.frame_bound[t] <= std::max(best, floor)) break;
-      for (int k = 0; k < n; ++k) {
+      for (int k : bounds.joints) {
         frame_delta[k] = delta.At(k, t);
         frame_delta_f[k].topRows<3>() = frame_delta[k].cast<float>();
       }
@@ -715,7 +773,7 @@ void PreparedMotion::Impl::MaxVertexError(const DeltaView& delta, const MaxSearc
       const Vec3d* norms = bounds.column_norms.data() + static_cast<size_t>(t) * n;
       // Only the groups that can beat the best so far, by decreasing bound.
       group_order.clear();
-      for (int j = 0; j < n; ++j) {
+      for (int j : bounds.groups) {
         if (bound[j] > std::max(best, floor)) group_order.push_back(j);
       }
       std::sort(group_order.begin(), group_order.end(), [&](int a, int b) { return bound[a] > bound[b]; });
@@ -729,6 +787,7 @@ void PreparedMotion::Impl::MaxVertexError(const DeltaView& delta, const MaxSearc
             [&](int g) { return BoxBound(frame_delta[g], norms[g], group_center, group_half); });
         if (refined <= std::max(best, floor)) continue;
         for (uint32_t cluster = group_clusters[j]; cluster < group_clusters[j + 1]; ++cluster) {
+          if (cluster_mask != nullptr && !(*cluster_mask)[cluster]) continue;
           const Vec3d& center = c.cluster_centers()[cluster];
           const Vec3d& half = c.cluster_half_extents()[cluster];
           const double cluster_bound = WeightedBound(
@@ -762,41 +821,58 @@ void PreparedMotion::Impl::MaxVertexError(const DeltaView& delta, const MaxSearc
   out.max_vertex_error_pct = 100.0 * best / c.height();
   out.max_vertex_frame = best_frame;
   out.max_vertex_index = best_vertex;
+  return MaxSearchStart{best_squared, best_frame, best_vertex};
 }
 
-void PreparedMotion::Impl::FrameSampledErrors(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame,
-                                              size_t q, SampleScratch& scratch, SampleSums& sums) const {
+void PreparedMotion::Impl::SampleFrameValues(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame,
+                                             size_t q, const std::vector<uint32_t>* vertices,
+                                             SampleScratch& scratch, SampleValues& values) const {
   // Blends in float, as the maximum search: the rounding is relative to Delta itself.
   std::vector<PaddedDelta>& frame_delta = scratch.frame_delta;
   for (int k = 0; k < n; ++k) frame_delta[k].topRows<3>() = frame.block<4, 3>(4 * k, 0).transpose().cast<float>();
-  const size_t count = sample_vertices.size();
-  uint32_t e = 0;
-  for (size_t v = 0; v < count; ++v) {
+  const size_t all = sample_vertices.size();
+  const size_t count = vertices ? vertices->size() : all;
+  const double* normals = sample_normals.data() + 4 * q * all;
+  // A subset's original normals are gathered into rows of its own length, as ChordAngles
+  // reads them.
+  if (vertices) {
+    for (size_t e = 0; e < count; ++e) {
+      for (int row = 0; row < 4; ++row) scratch.normals[row * count + e] = normals[row * all + (*vertices)[e]];
+    }
+    normals = scratch.normals.data();
+  }
+  for (size_t e = 0; e < count; ++e) {
+    const size_t v = vertices ? (*vertices)[e] : e;
     const SampleVertex& sample = sample_vertices[v];
     PaddedDelta blended = PaddedDelta::Zero();
-    for (; e < sample.influence_end; ++e) {
-      blended.noalias() += sample_influences[e].weight * frame_delta[sample_influences[e].joint];
+    for (uint32_t g = v == 0 ? 0 : sample_vertices[v - 1].influence_end; g < sample.influence_end; ++g) {
+      blended.noalias() += sample_influences[g].weight * frame_delta[sample_influences[g].joint];
     }
     const Eigen::Vector4d d = (blended.leftCols<3>() * sample.position + blended.col(3)).cast<double>();
     const Eigen::Vector4d dn = (blended.leftCols<3>() * sample.normal).cast<double>();
-    scratch.distance_squared[v] = d.squaredNorm();
-    scratch.normal_x[v] = dn.x();
-    scratch.normal_y[v] = dn.y();
-    scratch.normal_z[v] = dn.z();
+    values.distance_squared[v] = d.squaredNorm();
+    values.normal_squared[v] = dn.x() * dn.x() + dn.y() * dn.y() + dn.z() * dn.z();
+    scratch.normal_x[e] = dn.x();
+    scratch.normal_y[e] = dn.y();
+    scratch.normal_z[e] = dn.z();
   }
-  ChordAngles(count, sample_normals.data() + 4 * q * count, scratch.normal_x.data(),
-              scratch.normal_y.data(), scratch.normal_z.data(), scratch.angle.data());
-  for (size_t v = 0; v < count; ++v) {
-    double angle = scratch.angle[v];
+  ChordAngles(count, normals, scratch.normal_x.data(), scratch.normal_y.data(), scratch.normal_z.data(),
+              scratch.angle.data());
+  for (size_t e = 0; e < count; ++e) {
+    double angle = scratch.angle[e];
     // Past the series, or no direction to compare (n or n + dn zero: no angle).
     if (!(angle >= 0)) angle = std::isnan(angle) ? 0.0 : 2 * std::asin(std::min(-angle, 1.0));
+    values.angle[vertices ? (*vertices)[e] : e] = angle;
+  }
+}
+
+void PreparedMotion::Impl::AddSampleSums(const SampleValues& values, SampleSums& sums) const {
+  for (size_t v = 0; v < sample_vertices.size(); ++v) {
     const double area = sample_vertices[v].area;
-    sums.distance += area * std::sqrt(scratch.distance_squared[v]);
-    sums.distance_squared += area * scratch.distance_squared[v];
-    sums.angle += area * angle;
-    sums.normal_squared += area * (scratch.normal_x[v] * scratch.normal_x[v] +
-                                   scratch.normal_y[v] * scratch.normal_y[v] +
-                                   scratch.normal_z[v] * scratch.normal_z[v]);
+    sums.distance += area * std::sqrt(values.distance_squared[v]);
+    sums.distance_squared += area * values.distance_squared[v];
+    sums.angle += area * values.angle[v];
+    sums.normal_squared += area * values.normal_squared[v];
   }
 }
 
@@ -1018,15 +1094,177 @@ StatusOr<LevelResult> PreparedMotion::SolveOptimized(const ReducedSkeleton& leve
   return result;
 }
 
+PreparedMotion::Impl::DeltaView PreparedMotion::Impl::BaselineDelta(const ReducedSkeleton& level) const {
+  DeltaView baseline{&kt, std::vector<int>(n), &kt};
+  for (int k = 0; k < n; ++k) baseline.solution_row[k] = 4 * level.kept_joints[level.joint_to_slot[k]];
+  return baseline;
+}
+
 StatusOr<LevelErrors> PreparedMotion::BaselineErrors(const ReducedSkeleton& level) const {
   const Impl& d = *impl_;
   if (Status status = ValidateLevel(level, d.n); !status.ok()) return status;
-  // Delta_k = K_kept(phi(k)) - K_k.
-  Impl::DeltaView baseline{&d.kt, std::vector<int>(d.n), &d.kt};
-  for (int k = 0; k < d.n; ++k) baseline.solution_row[k] = 4 * level.kept_joints[level.joint_to_slot[k]];
   LevelErrors errors;
-  d.EvaluateErrors(baseline, level.kept_joints, Impl::Figures::kAll, errors);
+  d.EvaluateErrors(d.BaselineDelta(level), level.kept_joints, Impl::Figures::kAll, errors);
   return errors;
+}
+
+struct BaselineSequence::State {
+  std::shared_ptr<const PreparedMotion> prepared;
+  std::vector<uint8_t> kept;      // n: the joints the last level kept
+  std::vector<int> solution_row;  // n: its baseline's DeltaView::solution_row
+  // Every joint pair's PairTerms in every frame (T rows of |pairs|), for its Delta.
+  std::vector<double> pair_p, pair_n;
+  // Every sampled frame's SampleValues.
+  std::vector<PreparedMotion::Impl::SampleValues> sample_values;
+  PreparedMotion::Impl::MaxSearchStart maximum;  // its exact maximum
+  LevelErrors last;
+};
+
+BaselineSequence::BaselineSequence(std::shared_ptr<const PreparedMotion> prepared)
+    : state_(std::make_unique<State>()) {
+  State& st = *state_;
+  const PreparedMotion::Impl& d = *prepared->impl_;
+  st.prepared = std::move(prepared);
+  // Before the first level: the full skeleton, whose Delta is zero.
+  st.kept.assign(d.n, 1);
+  st.solution_row.resize(d.n);
+  for (int k = 0; k < d.n; ++k) st.solution_row[k] = 4 * k;
+  st.pair_p.assign(static_cast<size_t>(d.frames) * d.pairs.size(), 0.0);
+  st.pair_n.assign(static_cast<size_t>(d.frames) * d.pairs.size(), 0.0);
+  // The sample's values with a zero Delta, as EvaluateErrors computes them (angles of a
+  // few 1e-17 where a normal is compared with itself).
+  const size_t count = d.sample_vertices.size();
+  const Eigen::Matrix<double, Eigen::Dynamic, 3> zero = Eigen::Matrix<double, Eigen::Dynamic, 3>::Zero(4 * d.n, 3);
+  PreparedMotion::Impl::SampleScratch scratch(d.n, count);
+  st.sample_values.assign(d.sample_frames.size(), PreparedMotion::Impl::SampleValues(count));
+  for (size_t q = 0; q < d.sample_frames.size(); ++q) d.SampleFrameValues(zero, q, nullptr, scratch, st.sample_values[q]);
+  for (std::vector<double>* part : {&st.last.e, &st.last.ep_vertex, &st.last.ep_joint, &st.last.en_vertex,
+                                    &st.last.en_joint}) {
+    part->assign(d.frames, 0.0);
+  }
+}
+
+BaselineSequence::~BaselineSequence() = default;
+
+StatusOr<LevelErrors> BaselineSequence::Next(const ReducedSkeleton& level) {
+  State& st = *state_;
+  const PreparedMotion::Impl& d = *st.prepared->impl_;
+  const Character& c = *d.character;
+  const int n = d.n;
+  if (Status status = ValidateLevel(level, n); !status.ok()) return status;
+  std::vector<uint8_t> kept(n, 0);
+  for (int j : level.kept_joints) {
+    if (!st.kept[j]) {
+      return InvalidArgument("BaselineSequence: the level keeps joint '" + c.skeleton().joint_names[j] +
+                             "', which the level before it removed");
+    }
+    kept[j] = 1;
+  }
+  const PreparedMotion::Impl::DeltaView delta = d.BaselineDelta(level);
+  // The joints whose Delta changes: those whose nearest kept joint does.
+  std::vector<uint8_t> changed(n, 0);
+  bool any_changed = false;
+  for (int k = 0; k < n; ++k) {
+    changed[k] = delta.solution_row[k] != st.solution_row[k];
+    any_changed = any_changed || changed[k];
+  }
+  st.kept = std::move(kept);
+  st.solution_row = delta.solution_row;
+  if (!any_changed) return st.last;
+
+  const auto weighted_by_changed = [&](const auto* begin, const auto* end) {
+    return std::any_of(begin, end, [&](const auto& influence) { return changed[influence.joint] != 0; });
+  };
+  std::vector<size_t> changed_pairs;
+  for (size_t q = 0; q < d.pairs.size(); ++q) {
+    if (changed[d.pairs[q].first] || changed[d.pairs[q].second]) changed_pairs.push_back(q);
+  }
+  const std::vector<size_t> active_pairs = d.ActivePairs(delta);
+  std::vector<uint8_t> group_mask(n, 0);
+  for (int j = 0; j < n; ++j) {
+    group_mask[j] = weighted_by_changed(c.group_influences().data() + c.group_influence_offsets()[j],
+                                        c.group_influences().data() + c.group_influence_offsets()[j + 1]);
+  }
+  const size_t clusters = c.cluster_centers().size();
+  std::vector<uint8_t> cluster_mask(clusters, 0);
+  for (size_t cluster = 0; cluster < clusters; ++cluster) {
+    cluster_mask[cluster] =
+        weighted_by_changed(c.cluster_influences().data() + c.cluster_influence_offsets()[cluster],
+                            c.cluster_influences().data() + c.cluster_influence_offsets()[cluster + 1]);
+  }
+  std::vector<uint32_t> changed_samples;
+  for (size_t v = 0; v < d.sample_vertices.size(); ++v) {
+    const uint32_t begin = v == 0 ? 0 : d.sample_vertices[v - 1].influence_end;
+    if (weighted_by_changed(d.sample_influences.data() + begin,
+                            d.sample_influences.data() + d.sample_vertices[v].influence_end)) {
+      changed_samples.push_back(static_cast<uint32_t>(v));
+    }
+  }
+  // Vertices no changed joint weights keep their errors, all at most the last maximum: a
+  // search of the others from it finds the new one, unless the vertex that attained it
+  // has changed (then every cluster is searched again).
+  const RawSkin& skin = c.skin();
+  const int last_vertex = st.maximum.vertex;
+  bool restart = false;
+  for (uint32_t g = skin.influence_offsets[last_vertex]; g < skin.influence_offsets[last_vertex + 1]; ++g) {
+    restart = restart || changed[skin.influence_joints[g]];
+  }
+
+  LevelErrors out;
+  out.e.assign(d.frames, 0.0);
+  out.ep_vertex.assign(d.frames, 0.0);
+  out.ep_joint.assign(d.frames, 0.0);  // kept joints keep their matrices: no joint error
+  out.en_vertex.assign(d.frames, 0.0);
+  out.en_joint.assign(d.frames, 0.0);
+  PreparedMotion::Impl::MaxSearchBounds bounds = d.MakeMaxSearchBounds(restart ? nullptr : &group_mask);
+  PreparedMotion::Impl::SampleScratch scratch(n, changed_samples.size());
+  size_t next_sample = 0;
+  const size_t pair_count = d.pairs.size();
+  // Only the joints whose Delta is read: the changed pairs', the bounded groups' and the
+  // changed sampled vertices'.
+  std::vector<uint8_t> read(n, 0);
+  for (size_t q : changed_pairs) read[d.pairs[q].first] = read[d.pairs[q].second] = 1;
+  for (int k : bounds.joints) read[k] = 1;
+  for (uint32_t v : changed_samples) {
+    for (uint32_t g = v == 0 ? 0 : d.sample_vertices[v - 1].influence_end; g < d.sample_vertices[v].influence_end; ++g) {
+      read[d.sample_influences[g].joint] = 1;
+    }
+  }
+  std::vector<int> read_joints;
+  for (int k = 0; k < n; ++k) {
+    if (read[k]) read_joints.push_back(k);
+  }
+  Eigen::Matrix<double, Eigen::Dynamic, 3> frame = Eigen::Matrix<double, Eigen::Dynamic, 3>::Zero(4 * n, 3);
+  for (int t = 0; t < d.frames; ++t) {
+    delta.Frame(t, read_joints, frame);
+    double* pair_p = st.pair_p.data() + static_cast<size_t>(t) * pair_count;
+    double* pair_n = st.pair_n.data() + static_cast<size_t>(t) * pair_count;
+    for (size_t q : changed_pairs) std::tie(pair_p[q], pair_n[q]) = d.PairTerms(frame, q);
+    // Summed as EvaluateErrors sums them over joint pairs.
+    double ep = 0, en = 0;
+    for (size_t q : active_pairs) {
+      ep += pair_p[q];
+      en += pair_n[q];
+    }
+    out.ep_vertex[t] = std::max(0.0, ep);
+    out.en_vertex[t] = std::max(0.0, en);
+    out.e[t] = d.alpha * (out.ep_vertex[t] + out.ep_joint[t]) + d.beta * (out.en_vertex[t] + out.en_joint[t]);
+    d.FrameBounds(frame, t, bounds);
+    if (next_sample < d.sample_frames.size() && d.sample_frames[next_sample] == t) {
+      if (!changed_samples.empty()) {
+        d.SampleFrameValues(frame, next_sample, &changed_samples, scratch, st.sample_values[next_sample]);
+      }
+      ++next_sample;
+    }
+  }
+  st.maximum = d.MaxVertexError(delta, bounds, std::numeric_limits<double>::infinity(),
+                                restart ? PreparedMotion::Impl::MaxSearchStart{} : st.maximum,
+                                restart ? nullptr : &cluster_mask, out);
+  PreparedMotion::Impl::SampleSums sums;
+  for (const PreparedMotion::Impl::SampleValues& values : st.sample_values) d.AddSampleSums(values, sums);
+  d.FinishErrors(&sums, out);
+  st.last = out;
+  return out;
 }
 
 StatusOr<bool> PreparedMotion::MaxVertexErrorWithin(const ReducedSkeleton& level, double bound_pct) const {

@@ -30,67 +30,6 @@ bool Cancelled(const std::atomic<bool>* cancel) {
 
 Status CancelledStatus() { return Status(StatusCode::kNotFound, "the bake was cancelled"); }
 
-// Solves the given kept counts in parallel into `out`, keyed by count: each level's
-// optimised half and its baseline are separate tasks (a ladder's few levels of unequal
-// cost then balance better over the threads). on_done(levels done) runs on the calling
-// thread as levels complete.
-Status SolveCounts(const core::PreparedMotion& prepared, const core::JointRanking& ranking,
-                   const std::vector<int>& counts, TaskPool& pool,
-                   std::map<int, core::LevelResult>& out,
-                   const std::function<void(int)>& on_done, const std::atomic<bool>* cancel) {
-  const size_t count = counts.size();
-  std::vector<core::ReducedSkeleton> levels;
-  for (int kept : counts) {
-    auto level = core::ReduceSkeletonToCount(prepared.character(), ranking, kept);
-    if (!level.ok()) return level.status();
-    levels.push_back(*std::move(level));
-  }
-  std::vector<std::optional<core::LevelResult>> results(count);
-  std::vector<std::optional<core::LevelErrors>> baselines(count);
-  // Task 2i solves level i, task 2i + 1 evaluates its baseline.
-  std::vector<Status> errors(2 * count);
-  std::vector<std::atomic<int>> halves_done(count);
-  size_t reported = 0;
-  pool.Run(
-      static_cast<int>(2 * count),
-      [&](int task) {
-        if (Cancelled(cancel)) return;
-        const size_t index = static_cast<size_t>(task / 2);
-        if (task % 2 == 0) {
-          auto result = prepared.SolveOptimized(levels[index]);
-          if (result.ok()) {
-            results[index] = *std::move(result);
-          } else {
-            errors[task] = result.status();
-          }
-        } else {
-          auto baseline = prepared.BaselineErrors(levels[index]);
-          if (baseline.ok()) {
-            baselines[index] = *std::move(baseline);
-          } else {
-            errors[task] = baseline.status();
-          }
-        }
-        ++halves_done[index];
-      },
-      [&](int) {
-        size_t levels_done = 0;
-        for (const std::atomic<int>& halves : halves_done) levels_done += halves.load() == 2;
-        for (; reported < levels_done; ++reported) {
-          if (on_done) on_done(static_cast<int>(reported + 1));
-        }
-      });
-  if (Cancelled(cancel)) return CancelledStatus();
-  for (const Status& error : errors) {
-    if (!error.ok()) return error;
-  }
-  for (size_t index = 0; index < count; ++index) {
-    results[index]->baseline = *std::move(baselines[index]);
-    out.emplace(counts[index], *std::move(results[index]));
-  }
-  return Status::Ok();
-}
-
 }  // namespace
 
 Status BakeRequest::Validate() const {
@@ -110,6 +49,80 @@ Status BakeRequest::Validate() const {
   if (threads < 0 || threads > kMaxThreads) {
     return InvalidArgument("threads must be in [0, " + std::to_string(kMaxThreads) +
                            "] (0 = one per hardware thread)");
+  }
+  return Status::Ok();
+}
+
+Status SolveLevels(const std::shared_ptr<const core::PreparedMotion>& prepared,
+                   const core::JointRanking& ranking, const std::vector<int>& counts, TaskPool& pool,
+                   std::map<int, core::LevelResult>& out,
+                   const std::function<void(int)>& on_done, const std::atomic<bool>* cancel) {
+  const size_t count = counts.size();
+  std::vector<core::ReducedSkeleton> levels;
+  for (int kept : counts) {
+    auto level = core::ReduceSkeletonToCount(prepared->character(), ranking, kept);
+    if (!level.ok()) return level.status();
+    levels.push_back(*std::move(level));
+  }
+  std::vector<std::optional<core::LevelResult>> results(count);
+  std::vector<std::optional<core::LevelErrors>> baselines(count);
+  // Levels a joint apart (every level) take their baselines one from the other, in one
+  // task; a ladder's far apart levels change most joints at each step and keep a task per
+  // baseline, which balances better over threads. The first `baseline_tasks` tasks are the
+  // baselines' (first since they are the longest), the rest solve one level each.
+  bool consecutive = count > 1;
+  for (size_t index = 1; index < count; ++index) consecutive = consecutive && counts[index] == counts[index - 1] - 1;
+  const size_t baseline_tasks = consecutive ? 1 : count;
+  std::vector<Status> errors(baseline_tasks + count);
+  std::vector<std::atomic<int>> halves_done(count);
+  size_t reported = 0;
+  pool.Run(
+      static_cast<int>(baseline_tasks + count),
+      [&](int task) {
+        if (Cancelled(cancel)) return;
+        const auto set_baseline = [&](size_t index, StatusOr<core::LevelErrors> baseline) {
+          if (!baseline.ok()) {
+            errors[task] = baseline.status();
+            return false;
+          }
+          baselines[index] = *std::move(baseline);
+          ++halves_done[index];
+          return true;
+        };
+        if (consecutive && task == 0) {
+          core::BaselineSequence sequence(prepared);
+          for (size_t index = 0; index < count && !Cancelled(cancel); ++index) {
+            if (!set_baseline(index, sequence.Next(levels[index]))) return;
+          }
+          return;
+        }
+        if (static_cast<size_t>(task) < baseline_tasks) {
+          set_baseline(task, prepared->BaselineErrors(levels[task]));
+          return;
+        }
+        const size_t index = task - baseline_tasks;
+        auto result = prepared->SolveOptimized(levels[index]);
+        if (result.ok()) {
+          results[index] = *std::move(result);
+        } else {
+          errors[task] = result.status();
+        }
+        ++halves_done[index];
+      },
+      [&](int) {
+        size_t levels_done = 0;
+        for (const std::atomic<int>& halves : halves_done) levels_done += halves.load() == 2;
+        for (; reported < levels_done; ++reported) {
+          if (on_done) on_done(static_cast<int>(reported + 1));
+        }
+      });
+  if (Cancelled(cancel)) return CancelledStatus();
+  for (const Status& error : errors) {
+    if (!error.ok()) return error;
+  }
+  for (size_t index = 0; index < count; ++index) {
+    results[index]->baseline = *std::move(baselines[index]);
+    out.emplace(counts[index], *std::move(results[index]));
   }
   return Status::Ok();
 }
@@ -292,7 +305,7 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
                                       std::max<size_t>(counts.size() + (default_ladder ? 1 : 0), 1),
                     "solve");
   };
-  if (Status status = SolveCounts(**prepared, *ranking, counts, pool, solved, on_level_done, cancel);
+  if (Status status = SolveLevels(*prepared, *ranking, counts, pool, solved, on_level_done, cancel);
       !status.ok()) {
     return status;
   }
@@ -349,7 +362,7 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
     if (!solved.count(hi)) {
       counts.push_back(hi);
       std::sort(counts.begin(), counts.end(), std::greater<>());
-      if (Status status = SolveCounts(**prepared, *ranking, {hi}, pool, solved, on_level_done, cancel);
+      if (Status status = SolveLevels(*prepared, *ranking, {hi}, pool, solved, on_level_done, cancel);
           !status.ok()) {
         return status;
       }
@@ -369,7 +382,7 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
       std::vector<int> every;
       for (int count = n; count >= minimum; --count) every.push_back(count);
       std::map<int, core::LevelResult> results;
-      if (Status status = SolveCounts(**variant_prepared, *ranking, every, pool, results, {}, cancel);
+      if (Status status = SolveLevels(*variant_prepared, *ranking, every, pool, results, {}, cancel);
           !status.ok()) {
         return status;
       }

@@ -7,12 +7,14 @@
 #include <atomic>
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <memory>
 #include <string>
 #include <vector>
 
 #include <nlohmann/json.hpp>
 
+#include "base/parallel.h"
 #include "base/status.h"
 #include "core/character.h"
 #include "core/motion.h"
@@ -83,6 +85,17 @@ StatusOr<BakeInputs> PrepareInputs(const BakeRequest& request);
 // yardstick the bake time is compared with.
 double SkinningPassSeconds(const core::Character& character, const core::Motion& motion,
                            int threads);
+
+// The levels that keep `counts` joints (decreasing, each in [locked_count, n]: nested
+// levels of the ranking), solved on `pool` into `out` keyed by count, as Bake solves them:
+// each level's optimised half is a task, and so is its baseline, except that levels a joint
+// apart (every level) take their baselines one from the other in one task
+// (core::BaselineSequence). on_done(levels done so far) runs on the calling thread as
+// levels complete. kNotFound ("cancelled") when *cancel becomes true.
+Status SolveLevels(const std::shared_ptr<const core::PreparedMotion>& prepared,
+                   const core::JointRanking& ranking, const std::vector<int>& counts, TaskPool& pool,
+                   std::map<int, core::LevelResult>& out, const std::function<void(int)>& on_done = {},
+                   const std::atomic<bool>* cancel = nullptr);
 
 // The default ladder for n joints and the minimum the locks allow: n, ~3n/4, ~n/2, ~n/4,
 // clamped to [minimum, n], duplicates removed, finest first (the smallest useful level is

@@ -282,6 +282,90 @@ TEST_F(RealData, EveryLevelWorkloadGivesTheSameErrors) {
   }
 }
 
+// Baselines evaluated level from level agree with each level's own: every level of a
+// ranking, and a ladder's larger steps, each from a character with its own hierarchy.
+TEST_F(RealData, BaselineSequenceGivesEachLevelsBaselineErrors) {
+  for (const char* file : {"characters/stormtrooper.dae", "characters/RobotExpressive.glb",
+                           "characters/Fox.glb", "motions/cmu_131_01.bvh"}) {
+    const RealScene s = Load(file, 0, 60);
+    const int n = s.inputs.character->joint_count();
+    const double height = s.inputs.character->height();
+    const auto prepared = Prepare(s, core::Variant::kVPNO);
+    std::vector<int> every_level, ladder = DefaultLadder(n, s.ranking.locked_count);
+    for (int kept = n; kept >= s.ranking.locked_count; --kept) every_level.push_back(kept);
+    int restarts = 0;
+    for (const std::vector<int>* counts : {&every_level, &ladder}) {
+      core::BaselineSequence sequence(prepared);
+      core::LevelErrors last;
+      for (int kept : *counts) {
+        const core::ReducedSkeleton level = Level(s, kept);
+        const auto a = prepared->BaselineErrors(level);
+        const auto b = sequence.Next(level);
+        ASSERT_TRUE(a.ok() && b.ok()) << b.status().ToString();
+        const std::string where = std::string(file) + " kept " + std::to_string(kept);
+        ASSERT_EQ(b->e.size(), a->e.size());
+        for (size_t t = 0; t < a->e.size(); ++t) {
+          EXPECT_NEAR(b->ep_vertex[t], a->ep_vertex[t], 1e-9 * a->ep_vertex[t] + 1e-12 * height * height)
+              << where << " frame " << t;
+          EXPECT_NEAR(b->en_vertex[t], a->en_vertex[t], 1e-9 * a->en_vertex[t] + 1e-12) << where << " frame " << t;
+          EXPECT_NEAR(b->e[t], a->e[t], 1e-9 * a->e[t] + 1e-13) << where << " frame " << t;
+          EXPECT_EQ(b->ep_joint[t], 0.0) << where;
+          EXPECT_EQ(a->ep_joint[t], 0.0) << where;
+        }
+        EXPECT_NEAR(b->mean_e, a->mean_e, 1e-9 * a->mean_e + 1e-13) << where;
+        EXPECT_NEAR(b->rms_vertex_error_pct, a->rms_vertex_error_pct, 1e-9 * a->rms_vertex_error_pct + 1e-12)
+            << where;
+        // The same maximum: both blend the same vertices in the same float arithmetic.
+        EXPECT_EQ(b->max_vertex_error_pct, a->max_vertex_error_pct) << where;
+        // The sample's sums add the same values in the same order; only the ratio
+        // estimates' exact mean squares are summed another way.
+        EXPECT_NEAR(b->mean_vertex_error_pct, a->mean_vertex_error_pct, 1e-9 * a->mean_vertex_error_pct) << where;
+        EXPECT_NEAR(b->mean_normal_error_deg, a->mean_normal_error_deg, 1e-9 * a->mean_normal_error_deg) << where;
+        restarts += b->max_vertex_error_pct < last.max_vertex_error_pct;
+        last = *b;
+      }
+      // The same level again changes nothing.
+      const auto again = sequence.Next(Level(s, counts->back()));
+      ASSERT_TRUE(again.ok());
+      EXPECT_EQ(again->max_vertex_error_pct, last.max_vertex_error_pct);
+      EXPECT_EQ(again->e, last.e);
+      // A level that keeps a joint the last one removed is refused.
+      const auto wider = sequence.Next(Level(s, n));
+      EXPECT_FALSE(wider.ok()) << file;
+      EXPECT_EQ(wider.status().code(), StatusCode::kInvalidArgument);
+    }
+    // Some level's maximum fell below the one before, which only a search that restarts
+    // can find: that path is checked too.
+    if (std::string(file) != "characters/Fox.glb") {
+      EXPECT_GT(restarts, 0) << file;
+    }
+  }
+}
+
+// An every-level bake takes its baselines one level from the other, on its own thread:
+// the report still shows each level's own baseline.
+TEST_F(RealData, EveryLevelBakeReportsEachLevelsBaseline) {
+  const std::string file = "characters/stormtrooper.dae";
+  const RealScene s = Load(file);
+  BakeRequest request;
+  request.character = *io::LoadAssetFile(DataPath(file));
+  request.all_levels = true;
+  request.threads = 2;
+  request.measure_skinning_pass = false;
+  const auto baked = Bake(request);
+  ASSERT_TRUE(baked.ok()) << baked.status().ToString();
+  const auto prepared = Prepare(s, request.settings.variant);
+  const nlohmann::json& levels = baked->report.at("levels");
+  ASSERT_EQ(static_cast<int>(levels.size()), s.inputs.character->joint_count() - s.ranking.locked_count + 1);
+  for (const nlohmann::json& reported : levels) {
+    const int kept = reported.at("joints").get<int>();
+    const auto own = prepared->BaselineErrors(Level(s, kept));
+    ASSERT_TRUE(own.ok());
+    EXPECT_NEAR(reported.at("baseline_mean_E").get<double>(), own->mean_e, 1e-9 * own->mean_e) << kept;
+    EXPECT_EQ(reported.at("baseline_max_vertex_error_pct").get<double>(), own->max_vertex_error_pct) << kept;
+  }
+}
+
 // The decision agrees with the exact maximum on either side of it.
 TEST_F(RealData, MaxVertexErrorWithinDecidesLikeTheExactMaximum) {
   for (const char* file : {"characters/stormtrooper.dae", "characters/Orc.gltf", "motions/09_11_cmu.fbx"}) {
