@@ -67,17 +67,19 @@ Status SolveLevels(const std::shared_ptr<const core::PreparedMotion>& prepared,
   std::vector<std::optional<core::LevelResult>> results(count);
   std::vector<std::optional<core::LevelErrors>> baselines(count);
   // Levels a joint apart (every level) take their baselines one from the other, in one
-  // task; a ladder's far apart levels change most joints at each step and keep a task per
-  // baseline, which balances better over threads. The first `baseline_tasks` tasks are the
-  // baselines' (first since they are the longest), the rest solve one level each.
+  // task, the first (the longest); task i + 1 solves level i. A ladder's far apart levels
+  // change most joints at each step: each baseline is a task of its own, task 2i solving
+  // level i and task 2i + 1 its baseline, the order that balances best over threads.
   bool consecutive = count > 1;
-  for (size_t index = 1; index < count; ++index) consecutive = consecutive && counts[index] == counts[index - 1] - 1;
-  const size_t baseline_tasks = consecutive ? 1 : count;
-  std::vector<Status> errors(baseline_tasks + count);
+  for (size_t index = 1; index < count; ++index) {
+    consecutive = consecutive && counts[index] == counts[index - 1] - 1;
+  }
+  const size_t tasks = consecutive ? count + 1 : 2 * count;
+  std::vector<Status> errors(tasks);
   std::vector<std::atomic<int>> halves_done(count);
   size_t reported = 0;
   pool.Run(
-      static_cast<int>(baseline_tasks + count),
+      static_cast<int>(tasks),
       [&](int task) {
         if (Cancelled(cancel)) return;
         const auto set_baseline = [&](size_t index, StatusOr<core::LevelErrors> baseline) {
@@ -96,11 +98,11 @@ Status SolveLevels(const std::shared_ptr<const core::PreparedMotion>& prepared,
           }
           return;
         }
-        if (static_cast<size_t>(task) < baseline_tasks) {
-          set_baseline(task, prepared->BaselineErrors(levels[task]));
+        if (!consecutive && task % 2 == 1) {
+          set_baseline(task / 2, prepared->BaselineErrors(levels[task / 2]));
           return;
         }
-        const size_t index = task - baseline_tasks;
+        const size_t index = consecutive ? task - 1 : task / 2;
         auto result = prepared->SolveOptimized(levels[index]);
         if (result.ok()) {
           results[index] = *std::move(result);
