@@ -1200,13 +1200,15 @@ StatusOr<LevelErrors> BaselineSequence::Next(const ReducedSkeleton& level) {
       changed_samples.push_back(static_cast<uint32_t>(v));
     }
   }
-  // Vertices no changed joint weights keep their errors, all at most the last maximum: a
-  // search of the others from it finds the new one, unless the vertex that attained it
-  // has changed (then every cluster is searched again).
+  // The vertices that no changed joint weights keep their errors, all at most the last
+  // maximum: a search of the others from it finds the new one, unless the vertex that
+  // attained it has changed (then every cluster is searched again). With no maximum yet
+  // (none above the negligible), the unchanged vertices are all negligible.
   const RawSkin& skin = c.skin();
   const int last_vertex = st.maximum.vertex;
   bool restart = false;
-  for (uint32_t g = skin.influence_offsets[last_vertex]; g < skin.influence_offsets[last_vertex + 1]; ++g) {
+  for (uint32_t g = skin.influence_offsets[last_vertex];
+       st.maximum.best_squared > 0 && g < skin.influence_offsets[last_vertex + 1]; ++g) {
     restart = restart || changed[skin.influence_joints[g]];
   }
 
