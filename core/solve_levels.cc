@@ -118,15 +118,16 @@ struct PreparedMotion::Impl {
 
     // Whether Delta_k can be nonzero in some frame.
     bool Moves(int k) const { return solution != original || solution_row[k] != 4 * k; }
-    Affine34d At(int k, int t) const {
-      return (solution->block<4, 3>(solution_row[k], 3 * t) - original->block<4, 3>(4 * k, 3 * t))
-          .transpose();
-    }
+    Affine34d At(int k, int t) const { return TransposedAt(k, t).transpose(); }
     // Frame t's Delta_k^T stacked: 4n x 3, block (4k, 0) = Delta_k(t)^T.
     void Frame(int t, Eigen::Matrix<double, Eigen::Dynamic, 3>& out) const;
     // The same for the listed joints only; the other blocks are left as they are.
     void Frame(int t, const std::vector<int>& joints, Eigen::Matrix<double, Eigen::Dynamic, 3>& out) const {
-      for (int k : joints) out.block<4, 3>(4 * k, 0) = At(k, t).transpose();
+      for (int k : joints) out.block<4, 3>(4 * k, 0) = TransposedAt(k, t);
+    }
+    // Delta_k(t)^T, the block Frame writes.
+    Eigen::Matrix<double, 4, 3> TransposedAt(int k, int t) const {
+      return solution->block<4, 3>(solution_row[k], 3 * t) - original->block<4, 3>(4 * k, 3 * t);
     }
   };
   // The baseline's Delta_k = K_kept(phi(k)) - K_k of a validated level.
@@ -456,10 +457,7 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
 
 void PreparedMotion::Impl::DeltaView::Frame(int t, Eigen::Matrix<double, Eigen::Dynamic, 3>& out) const {
   const int n = static_cast<int>(solution_row.size());
-  for (int k = 0; k < n; ++k) {
-    out.block<4, 3>(4 * k, 0) =
-        solution->block<4, 3>(solution_row[k], 3 * t) - original->block<4, 3>(4 * k, 3 * t);
-  }
+  for (int k = 0; k < n; ++k) out.block<4, 3>(4 * k, 0) = TransposedAt(k, t);
 }
 
 std::vector<size_t> PreparedMotion::Impl::ActivePairs(const DeltaView& delta) const {

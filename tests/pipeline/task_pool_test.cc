@@ -24,7 +24,6 @@ bool WaitFor(Condition&& condition) {
   return condition();
 }
 
-
 TEST(TaskPool, RunsEveryPieceOnceAndReportsEachCountInOrder) {
   for (int threads : {1, 2, 4}) {
     TaskPool pool(threads);
