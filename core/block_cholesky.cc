@@ -1,9 +1,10 @@
 #include "core/block_cholesky.h"
 
+#include <Eigen/Cholesky>
 #include <algorithm>
 #include <utility>
 
-#include <Eigen/Cholesky>
+#include "base/simd.h"
 
 namespace motionlod::core {
 
@@ -89,75 +90,81 @@ double BlockSymmetric<B>::Trace() const {
 
 template <int B>
 StatusOr<BlockCholesky<B>> BlockCholesky<B>::Factor(const BlockSymmetric<B>& a) {
-  const int count = a.block_count();
-  // Columns are indexed by A's blocks and eliminated from the last to the first, so a
-  // block (r, s) of the factor has r < s: row r is eliminated after column s.
-  BlockCholesky factor;
-  factor.columns_.resize(count);
-  std::vector<Block> diagonal(count);
-  for (int s = 0; s < count; ++s) diagonal[s] = a.diagonal(s);
-  for (const auto& block : a.lower()) {
-    factor.columns_[block.row].below.emplace_back(block.col, block.value.transpose());
-  }
-  std::vector<int> where(count, -1);
-  for (int s = count - 1; s >= 0; --s) {
-    Column& column = factor.columns_[s];
-    const Eigen::LLT<Block> llt(diagonal[s]);
-    const Block l = llt.matrixL();
-    if (llt.info() != Eigen::Success || !l.allFinite()) {
-      return Status(StatusCode::kInternal, "a normal matrix is not positive definite");
+  return RunWithWidestSimd([&]() -> StatusOr<BlockCholesky<B>> {
+    const int count = a.block_count();
+    // Columns are indexed by A's blocks and eliminated from the last to the first, so a
+    // block (r, s) of the factor has r < s: row r is eliminated after column s.
+    BlockCholesky factor;
+    factor.columns_.resize(count);
+    std::vector<Block> diagonal(count);
+    for (int s = 0; s < count; ++s) diagonal[s] = a.diagonal(s);
+    for (const auto& block : a.lower()) {
+      factor.columns_[block.row].below.emplace_back(block.col, block.value.transpose());
     }
-    column.diagonal_inverse = l.template triangularView<Eigen::Lower>().solve(Block::Identity());
-    for (auto& [r, value] : column.below) value = value * column.diagonal_inverse.transpose();
-    // The Schur complement: A(r1, r2) -= L(r1, s) L(r2, s)^T for rows r1 <= r2 (r1 is
-    // eliminated after r2), the fill created where A has no such block.
-    for (const auto& [r2, l2] : column.below) {
-      diagonal[r2].noalias() -= l2 * l2.transpose();
-      auto& target = factor.columns_[r2].below;
-      for (size_t e = 0; e < target.size(); ++e) where[target[e].first] = static_cast<int>(e);
-      for (const auto& [r1, l1] : column.below) {
-        if (r1 >= r2) continue;
-        if (where[r1] < 0) {
-          where[r1] = static_cast<int>(target.size());
-          target.emplace_back(r1, Block::Zero());
-        }
-        target[where[r1]].second.noalias() -= l1 * l2.transpose();
+    std::vector<int> where(count, -1);
+    for (int s = count - 1; s >= 0; --s) {
+      Column& column = factor.columns_[s];
+      const Eigen::LLT<Block> llt(diagonal[s]);
+      const Block l = llt.matrixL();
+      if (llt.info() != Eigen::Success || !l.allFinite()) {
+        return Status(StatusCode::kInternal, "a normal matrix is not positive definite");
       }
-      for (const auto& entry : target) where[entry.first] = -1;
+      column.diagonal_inverse = l.template triangularView<Eigen::Lower>().solve(Block::Identity());
+      for (auto& [r, value] : column.below) value = value * column.diagonal_inverse.transpose();
+      // The Schur complement: A(r1, r2) -= L(r1, s) L(r2, s)^T for rows r1 <= r2 (r1 is
+      // eliminated after r2), the fill created where A has no such block.
+      for (const auto& [r2, l2] : column.below) {
+        diagonal[r2].noalias() -= l2 * l2.transpose();
+        auto& target = factor.columns_[r2].below;
+        for (size_t e = 0; e < target.size(); ++e) where[target[e].first] = static_cast<int>(e);
+        for (const auto& [r1, l1] : column.below) {
+          if (r1 >= r2) continue;
+          if (where[r1] < 0) {
+            where[r1] = static_cast<int>(target.size());
+            target.emplace_back(r1, Block::Zero());
+          }
+          target[where[r1]].second.noalias() -= l1 * l2.transpose();
+        }
+        for (const auto& entry : target) where[entry.first] = -1;
+      }
     }
-  }
-  return factor;
+    return factor;
+  });
 }
 
 template <int B>
 Eigen::MatrixXd BlockCholesky<B>::SolveTransposed(const Eigen::MatrixXd& bt) const {
-  const int count = static_cast<int>(columns_.size());
-  const Eigen::Index dim = static_cast<Eigen::Index>(B) * count;
-  const Eigen::Index cols = bt.rows();
-  // About 1 MiB of panels per chunk, a multiple of 8 rows (whole vectors).
-  constexpr Eigen::Index kChunkBytes = Eigen::Index{1} << 20;
-  const Eigen::Index chunk =
-      std::min(cols, std::max<Eigen::Index>(8, kChunkBytes / (8 * std::max<Eigen::Index>(dim, 1)) / 8 * 8));
-  Eigen::MatrixXd x(dim, cols);
-  Eigen::MatrixXd y(chunk, dim);
-  const Eigen::Index stride = chunk;
-  auto panel = [&](int s) { return y.data() + static_cast<Eigen::Index>(B) * s * stride; };
-  for (Eigen::Index first = 0; first < cols; first += chunk) {
-    const Eigen::Index rows = std::min(chunk, cols - first);
-    y.topRows(rows) = bt.middleRows(first, rows);
-    for (int s = count - 1; s >= 0; --s) {  // L z = y
-      MultiplyPanel<B>(panel(s), columns_[s].diagonal_inverse, rows, stride);
-      for (const auto& [r, l] : columns_[s].below) AddPanelProduct<B>(panel(r), panel(s), -l, rows, stride);
-    }
-    for (int s = 0; s < count; ++s) {  // L^T w = z
-      for (const auto& [r, l] : columns_[s].below) {
-        AddPanelProduct<B>(panel(s), panel(r), -l.transpose(), rows, stride);
+  return RunWithWidestSimd([&]() -> Eigen::MatrixXd {
+    const int count = static_cast<int>(columns_.size());
+    const Eigen::Index dim = static_cast<Eigen::Index>(B) * count;
+    const Eigen::Index cols = bt.rows();
+    // About 1 MiB of panels per chunk, a multiple of 8 rows (whole vectors).
+    constexpr Eigen::Index kChunkBytes = Eigen::Index{1} << 20;
+    const Eigen::Index chunk = std::min(
+        cols,
+        std::max<Eigen::Index>(8, kChunkBytes / (8 * std::max<Eigen::Index>(dim, 1)) / 8 * 8));
+    Eigen::MatrixXd x(dim, cols);
+    Eigen::MatrixXd y(chunk, dim);
+    const Eigen::Index stride = chunk;
+    auto panel = [&](int s) { return y.data() + static_cast<Eigen::Index>(B) * s * stride; };
+    for (Eigen::Index first = 0; first < cols; first += chunk) {
+      const Eigen::Index rows = std::min(chunk, cols - first);
+      y.topRows(rows) = bt.middleRows(first, rows);
+      for (int s = count - 1; s >= 0; --s) {  // L z = y
+        MultiplyPanel<B>(panel(s), columns_[s].diagonal_inverse, rows, stride);
+        for (const auto& [r, l] : columns_[s].below)
+          AddPanelProduct<B>(panel(r), panel(s), -l, rows, stride);
       }
-      MultiplyPanel<B>(panel(s), columns_[s].diagonal_inverse.transpose(), rows, stride);
+      for (int s = 0; s < count; ++s) {  // L^T w = z
+        for (const auto& [r, l] : columns_[s].below) {
+          AddPanelProduct<B>(panel(s), panel(r), -l.transpose(), rows, stride);
+        }
+        MultiplyPanel<B>(panel(s), columns_[s].diagonal_inverse.transpose(), rows, stride);
+      }
+      x.middleCols(first, rows) = y.topRows(rows).transpose();
     }
-    x.middleCols(first, rows) = y.topRows(rows).transpose();
-  }
-  return x;
+    return x;
+  });
 }
 
 template void AddPanelProduct<4>(double*, const double*, const Eigen::Matrix<double, 4, 4>&, Eigen::Index,

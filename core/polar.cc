@@ -1,10 +1,11 @@
 #include "core/polar.h"
 
+#include <Eigen/LU>
+#include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
 
-#include <Eigen/LU>
-#include <Eigen/SVD>
+#include "base/simd.h"
 
 namespace motionlod::core {
 
@@ -59,63 +60,68 @@ Eigen::Matrix3d NearestRotation(const Eigen::Matrix3d& a) {
 }
 
 void NearestRotations(std::span<Eigen::Matrix3d> matrices) {
-  constexpr int kLanes = 8;
-  const Eigen::Matrix3d identity = Eigen::Matrix3d::Identity();
-  for (size_t first = 0; first < matrices.size(); first += kLanes) {
-    const int lanes = static_cast<int>(std::min<size_t>(kLanes, matrices.size() - first));
-    // x[3 c + r][lane]: coefficient (r, c) of each lane's iterate, column-major as Eigen.
-    double x[9][kLanes];
-    bool alone[kLanes] = {};
-    for (int l = 0; l < kLanes; ++l) {
-      const Eigen::Matrix3d a = l < lanes ? matrices[first + l] : identity;
-      const double norm_squared = a.squaredNorm();
-      const double norm = std::sqrt(norm_squared);
-      // NearestRotation's start; its first step is Newton-Schulz only if e^2 < 1/4.
-      const Eigen::Matrix3d start = a * (std::sqrt(3.0) / norm);
-      const double error_squared = (start.transpose() * start - Eigen::Matrix3d::Identity()).squaredNorm();
-      alone[l] = !(norm_squared > 0) || !(a.determinant() > 1e-6 * norm * norm_squared) ||
-                 !(error_squared < 0.25);
-      for (int q = 0; q < 9; ++q) x[q][l] = alone[l] ? identity(q) : start(q);
-    }
-    for (int iteration = 0; iteration < 30; ++iteration) {
-      double g[6][kLanes];  // X^T X: 00, 11, 22, 01, 02, 12
-      double error_squared[kLanes];
+  RunWithWidestSimd([&] {
+    constexpr int kLanes = 8;
+    const Eigen::Matrix3d identity = Eigen::Matrix3d::Identity();
+    for (size_t first = 0; first < matrices.size(); first += kLanes) {
+      const int lanes = static_cast<int>(std::min<size_t>(kLanes, matrices.size() - first));
+      // x[3 c + r][lane]: coefficient (r, c) of each lane's iterate, column-major as Eigen.
+      double x[9][kLanes];
+      bool alone[kLanes] = {};
       for (int l = 0; l < kLanes; ++l) {
-        g[0][l] = x[0][l] * x[0][l] + x[1][l] * x[1][l] + x[2][l] * x[2][l];
-        g[1][l] = x[3][l] * x[3][l] + x[4][l] * x[4][l] + x[5][l] * x[5][l];
-        g[2][l] = x[6][l] * x[6][l] + x[7][l] * x[7][l] + x[8][l] * x[8][l];
-        g[3][l] = x[0][l] * x[3][l] + x[1][l] * x[4][l] + x[2][l] * x[5][l];
-        g[4][l] = x[0][l] * x[6][l] + x[1][l] * x[7][l] + x[2][l] * x[8][l];
-        g[5][l] = x[3][l] * x[6][l] + x[4][l] * x[7][l] + x[5][l] * x[8][l];
-        error_squared[l] = (g[0][l] - 1) * (g[0][l] - 1) + (g[1][l] - 1) * (g[1][l] - 1) +
-                           (g[2][l] - 1) * (g[2][l] - 1) +
-                           2 * (g[3][l] * g[3][l] + g[4][l] * g[4][l] + g[5][l] * g[5][l]);
+        const Eigen::Matrix3d a = l < lanes ? matrices[first + l] : identity;
+        const double norm_squared = a.squaredNorm();
+        const double norm = std::sqrt(norm_squared);
+        // NearestRotation's start; its first step is Newton-Schulz only if e^2 < 1/4.
+        const Eigen::Matrix3d start = a * (std::sqrt(3.0) / norm);
+        const double error_squared =
+            (start.transpose() * start - Eigen::Matrix3d::Identity()).squaredNorm();
+        alone[l] = !(norm_squared > 0) || !(a.determinant() > 1e-6 * norm * norm_squared) ||
+                   !(error_squared < 0.25);
+        for (int q = 0; q < 9; ++q) x[q][l] = alone[l] ? identity(q) : start(q);
       }
-      const double largest_error_squared = *std::max_element(error_squared, error_squared + kLanes);
-      if (largest_error_squared < 1e-26) break;
-      // X (3I - X^T X) / 2, as NearestRotation; the step is the identity's to rounding for
-      // a lane that has converged.
-      for (int l = 0; l < kLanes; ++l) {
-        const double s00 = 1.5 - 0.5 * g[0][l], s11 = 1.5 - 0.5 * g[1][l], s22 = 1.5 - 0.5 * g[2][l];
-        const double s01 = -0.5 * g[3][l], s02 = -0.5 * g[4][l], s12 = -0.5 * g[5][l];
-        for (int r = 0; r < 3; ++r) {
-          const double x0 = x[r][l], x1 = x[3 + r][l], x2 = x[6 + r][l];
-          x[r][l] = x0 * s00 + x1 * s01 + x2 * s02;
-          x[3 + r][l] = x0 * s01 + x1 * s11 + x2 * s12;
-          x[6 + r][l] = x0 * s02 + x1 * s12 + x2 * s22;
+      for (int iteration = 0; iteration < 30; ++iteration) {
+        double g[6][kLanes];  // X^T X: 00, 11, 22, 01, 02, 12
+        double error_squared[kLanes];
+        for (int l = 0; l < kLanes; ++l) {
+          g[0][l] = x[0][l] * x[0][l] + x[1][l] * x[1][l] + x[2][l] * x[2][l];
+          g[1][l] = x[3][l] * x[3][l] + x[4][l] * x[4][l] + x[5][l] * x[5][l];
+          g[2][l] = x[6][l] * x[6][l] + x[7][l] * x[7][l] + x[8][l] * x[8][l];
+          g[3][l] = x[0][l] * x[3][l] + x[1][l] * x[4][l] + x[2][l] * x[5][l];
+          g[4][l] = x[0][l] * x[6][l] + x[1][l] * x[7][l] + x[2][l] * x[8][l];
+          g[5][l] = x[3][l] * x[6][l] + x[4][l] * x[7][l] + x[5][l] * x[8][l];
+          error_squared[l] = (g[0][l] - 1) * (g[0][l] - 1) + (g[1][l] - 1) * (g[1][l] - 1) +
+                             (g[2][l] - 1) * (g[2][l] - 1) +
+                             2 * (g[3][l] * g[3][l] + g[4][l] * g[4][l] + g[5][l] * g[5][l]);
+        }
+        const double largest_error_squared =
+            *std::max_element(error_squared, error_squared + kLanes);
+        if (largest_error_squared < 1e-26) break;
+        // X (3I - X^T X) / 2, as NearestRotation; the step is the identity's to rounding for
+        // a lane that has converged.
+        for (int l = 0; l < kLanes; ++l) {
+          const double s00 = 1.5 - 0.5 * g[0][l], s11 = 1.5 - 0.5 * g[1][l],
+                       s22 = 1.5 - 0.5 * g[2][l];
+          const double s01 = -0.5 * g[3][l], s02 = -0.5 * g[4][l], s12 = -0.5 * g[5][l];
+          for (int r = 0; r < 3; ++r) {
+            const double x0 = x[r][l], x1 = x[3 + r][l], x2 = x[6 + r][l];
+            x[r][l] = x0 * s00 + x1 * s01 + x2 * s02;
+            x[3 + r][l] = x0 * s01 + x1 * s11 + x2 * s12;
+            x[6 + r][l] = x0 * s02 + x1 * s12 + x2 * s22;
+          }
+        }
+        if (largest_error_squared < 1e-13) break;
+      }
+      for (int l = 0; l < lanes; ++l) {
+        Eigen::Matrix3d& m = matrices[first + l];
+        if (alone[l]) {
+          m = NearestRotation(m);
+        } else {
+          for (int q = 0; q < 9; ++q) m(q) = x[q][l];
         }
       }
-      if (largest_error_squared < 1e-13) break;
     }
-    for (int l = 0; l < lanes; ++l) {
-      Eigen::Matrix3d& m = matrices[first + l];
-      if (alone[l]) {
-        m = NearestRotation(m);
-      } else {
-        for (int q = 0; q < 9; ++q) m(q) = x[q][l];
-      }
-    }
-  }
+  });
 }
 
 }  // namespace motionlod::core

@@ -8,6 +8,7 @@
 #include <tuple>
 
 #include "base/hash.h"
+#include "base/simd.h"
 #include "core/block_cholesky.h"
 #include "core/polar.h"
 
@@ -472,44 +473,47 @@ std::vector<size_t> PreparedMotion::Impl::ActivePairs(const DeltaView& delta) co
 
 void PreparedMotion::Impl::EvaluateErrors(const DeltaView& delta, const std::vector<int>& kept,
                                           Figures figures, LevelErrors& out, double decide_within) const {
-  const bool quadratic = figures != Figures::kMaxVertexError;
-  const bool maximum = figures != Figures::kQuadratic;
-  const bool sampled = figures == Figures::kAll;
-  bool moves = false;
-  for (int k = 0; k < n && !moves; ++k) moves = delta.Moves(k);
-  if (quadratic) {
-    out.e.assign(frames, 0.0);
-    out.ep_vertex.assign(frames, 0.0);
-    out.ep_joint.assign(frames, 0.0);
-    out.en_vertex.assign(frames, 0.0);
-    out.en_joint.assign(frames, 0.0);
-  }
-  // The full skeleton (or a baseline that removes nothing): every figure is exactly 0.
-  if (!moves) return;
-
-  const std::vector<size_t> active_pairs = quadratic ? ActivePairs(delta) : std::vector<size_t>{};
-  const std::optional<KeptForms> kept_forms =
-      quadratic ? MakeKeptForms(delta, kept, active_pairs.size()) : std::nullopt;
-  Eigen::Matrix<double, Eigen::Dynamic, 3> kept_frame(kept_forms ? 4 * kept.size() : 0, 3);
-  MaxSearchBounds bounds = maximum ? MakeMaxSearchBounds(nullptr) : MaxSearchBounds{};
-  SampleSums sums;
-  size_t next_sample = 0;
-  SampleScratch scratch(sampled ? n : 0, sampled ? sample_vertices.size() : 0);
-  SampleValues values(sampled ? sample_vertices.size() : 0);
-  Eigen::Matrix<double, Eigen::Dynamic, 3> frame(4 * n, 3);
-  for (int t = 0; t < frames; ++t) {
-    delta.Frame(t, frame);
+  RunWithWidestSimd([&] {
+    const bool quadratic = figures != Figures::kMaxVertexError;
+    const bool maximum = figures != Figures::kQuadratic;
+    const bool sampled = figures == Figures::kAll;
+    bool moves = false;
+    for (int k = 0; k < n && !moves; ++k) moves = delta.Moves(k);
     if (quadratic) {
-      FrameQuadraticErrors(frame, active_pairs, kept_forms ? &*kept_forms : nullptr, kept_frame, kept, t, out);
+      out.e.assign(frames, 0.0);
+      out.ep_vertex.assign(frames, 0.0);
+      out.ep_joint.assign(frames, 0.0);
+      out.en_vertex.assign(frames, 0.0);
+      out.en_joint.assign(frames, 0.0);
     }
-    if (maximum) FrameBounds(frame, t, bounds);
-    if (sampled && next_sample < sample_frames.size() && sample_frames[next_sample] == t) {
-      SampleFrameValues(frame, next_sample++, nullptr, scratch, values);
-      AddSampleSums(values, sums);
+    // The full skeleton (or a baseline that removes nothing): every figure is exactly 0.
+    if (!moves) return;
+
+    const std::vector<size_t> active_pairs = quadratic ? ActivePairs(delta) : std::vector<size_t>{};
+    const std::optional<KeptForms> kept_forms =
+        quadratic ? MakeKeptForms(delta, kept, active_pairs.size()) : std::nullopt;
+    Eigen::Matrix<double, Eigen::Dynamic, 3> kept_frame(kept_forms ? 4 * kept.size() : 0, 3);
+    MaxSearchBounds bounds = maximum ? MakeMaxSearchBounds(nullptr) : MaxSearchBounds{};
+    SampleSums sums;
+    size_t next_sample = 0;
+    SampleScratch scratch(sampled ? n : 0, sampled ? sample_vertices.size() : 0);
+    SampleValues values(sampled ? sample_vertices.size() : 0);
+    Eigen::Matrix<double, Eigen::Dynamic, 3> frame(4 * n, 3);
+    for (int t = 0; t < frames; ++t) {
+      delta.Frame(t, frame);
+      if (quadratic) {
+        FrameQuadraticErrors(frame, active_pairs, kept_forms ? &*kept_forms : nullptr, kept_frame,
+                             kept, t, out);
+      }
+      if (maximum) FrameBounds(frame, t, bounds);
+      if (sampled && next_sample < sample_frames.size() && sample_frames[next_sample] == t) {
+        SampleFrameValues(frame, next_sample++, nullptr, scratch, values);
+        AddSampleSums(values, sums);
+      }
     }
-  }
-  if (maximum) MaxVertexError(delta, bounds, decide_within, MaxSearchStart{}, nullptr, out);
-  if (quadratic) FinishErrors(sampled ? &sums : nullptr, out);
+    if (maximum) MaxVertexError(delta, bounds, decide_within, MaxSearchStart{}, nullptr, out);
+    if (quadratic) FinishErrors(sampled ? &sums : nullptr, out);
+  });
 }
 
 void PreparedMotion::Impl::FinishErrors(const SampleSums* sums, LevelErrors& out) const {
@@ -690,178 +694,192 @@ PreparedMotion::Impl::MaxSearchBounds PreparedMotion::Impl::MakeMaxSearchBounds(
 
 void PreparedMotion::Impl::FrameBounds(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame, int t,
                                        MaxSearchBounds& bounds) const {
-  // Coarse bounds for every group from the joints' own boxes (one box bound per joint); a
-  // visited group is refined with its own box.
-  const Character& c = *character;
-  const auto& group_influence_offsets = c.group_influence_offsets();
-  const auto& group_influences = c.group_influences();
-  Vec3d* norms = bounds.column_norms.data() + static_cast<size_t>(t) * n;
-  for (int k : bounds.joints) {
-    const Affine34d dk = frame.block<4, 3>(4 * k, 0).transpose();
-    norms[k] = dk.leftCols<3>().colwise().norm().transpose();
-    bounds.joint_bound[k] =
-        BoxBound(dk, norms[k], c.joint_vertex_centers()[k], c.joint_vertex_half_extents()[k]);
-  }
-  for (int j : bounds.groups) {
-    const double u = WeightedBound(group_influences.data() + group_influence_offsets[j],
-                                   group_influences.data() + group_influence_offsets[j + 1],
-                                   [&](int g) { return bounds.joint_bound[g]; });
-    bounds.group_bound[static_cast<size_t>(t) * n + j] = u;
-    bounds.frame_bound[t] = std::max(bounds.frame_bound[t], u);
-  }
+  RunWithWidestSimd([&] {
+    // Coarse bounds for every group from the joints' own boxes (one box bound per joint); a
+    // visited group is refined with its own box.
+    const Character& c = *character;
+    const auto& group_influence_offsets = c.group_influence_offsets();
+    const auto& group_influences = c.group_influences();
+    Vec3d* norms = bounds.column_norms.data() + static_cast<size_t>(t) * n;
+    for (int k : bounds.joints) {
+      const Affine34d dk = frame.block<4, 3>(4 * k, 0).transpose();
+      norms[k] = dk.leftCols<3>().colwise().norm().transpose();
+      bounds.joint_bound[k] =
+          BoxBound(dk, norms[k], c.joint_vertex_centers()[k], c.joint_vertex_half_extents()[k]);
+    }
+    for (int j : bounds.groups) {
+      const double u = WeightedBound(group_influences.data() + group_influence_offsets[j],
+                                     group_influences.data() + group_influence_offsets[j + 1],
+                                     [&](int g) { return bounds.joint_bound[g]; });
+      bounds.group_bound[static_cast<size_t>(t) * n + j] = u;
+      bounds.frame_bound[t] = std::max(bounds.frame_bound[t], u);
+    }
+  });
 }
 
 PreparedMotion::Impl::MaxSearchStart PreparedMotion::Impl::MaxVertexError(
     const DeltaView& delta, const MaxSearchBounds& bounds, double decide_within,
     const MaxSearchStart& start, const std::vector<uint8_t>* cluster_mask, LevelErrors& out) const {
-  // Exact maximum of |d_i(t)|, d_i(t) = sum_g w_ig Delta_g(t) [v0_i; 1], over all vertices
-  // and frames without evaluating most of them. For a box with center c and half extents
-  // h in the bind pose, every vertex v in it has
-  //   |Delta_g [v;1]| <= U_g(t) = |Delta_g [c;1]| + sum_a |Delta_g(3x3) e_a| h_a,
-  // so a set of vertices whose joints g give them weights of at most W_g has
-  //   |d_i| <= min(max_g U_g, sum_g W_g U_g)
-  // (the first because i's weights sum to 1, the second by the triangle inequality; the
-  // second stays tight for vertices lightly weighted to a joint that moved a lot).
-  // Bounds nest: per frame and vertex group (dominant joint) from the joints' boxes
-  // (FrameBounds), then from the group's box, then per cluster; frames and groups are
-  // visited by decreasing bound and only clusters whose bound beats the best exact value
-  // so far are evaluated.
-  // Bounds below kNegligible of the height are not refined: a level that close to exact
-  // reports its maximum to within 1e-4 % of the height (0.01 px on a 10000 px tall
-  // character). That is the resolution of the streamed float matrices themselves (their
-  // rounding moves a vertex by about 1e-7 of its distance from the origin), and it keeps
-  // the rigid full level of a rig whose matrices are rotations only to float precision
-  // (most glTF and FBX files) from visiting every vertex of every frame.
-  constexpr double kNegligible = 1e-6;
-  const Character& c = *character;
-  const RawSkin& skin = c.skin();
-  const auto& group_clusters = c.group_cluster_offsets();
-  const auto& group_influence_offsets = c.group_influence_offsets();
-  const auto& group_influences = c.group_influences();
-  const auto& cluster_vertex_offsets = c.cluster_vertex_offsets();
-  const auto& cluster_vertices = c.cluster_vertices();
-  const auto& cluster_influence_offsets = c.cluster_influence_offsets();
-  const auto& cluster_influences = c.cluster_influences();
+  return RunWithWidestSimd([&]() -> MaxSearchStart {
+    // Exact maximum of |d_i(t)|, d_i(t) = sum_g w_ig Delta_g(t) [v0_i; 1], over all vertices
+    // and frames without evaluating most of them. For a box with center c and half extents
+    // h in the bind pose, every vertex v in it has
+    //   |Delta_g [v;1]| <= U_g(t) = |Delta_g [c;1]| + sum_a |Delta_g(3x3) e_a| h_a,
+    // so a set of vertices whose joints g give them weights of at most W_g has
+    //   |d_i| <= min(max_g U_g, sum_g W_g U_g)
+    // (the first because i's weights sum to 1, the second by the triangle inequality; the
+    // second stays tight for vertices lightly weighted to a joint that moved a lot).
+    // Bounds nest: per frame and vertex group (dominant joint) from the joints' boxes
+    // (FrameBounds), then from the group's box, then per cluster; frames and groups are
+    // visited by decreasing bound and only clusters whose bound beats the best exact value
+    // so far are evaluated.
+    // Bounds below kNegligible of the height are not refined: a level that close to exact
+    // reports its maximum to within 1e-4 % of the height (0.01 px on a 10000 px tall
+    // character). That is the resolution of the streamed float matrices themselves (their
+    // rounding moves a vertex by about 1e-7 of its distance from the origin), and it keeps
+    // the rigid full level of a rig whose matrices are rotations only to float precision
+    // (most glTF and FBX files) from visiting every vertex of every frame.
+    constexpr double kNegligible = 1e-6;
+    const Character& c = *character;
+    const RawSkin& skin = c.skin();
+    const auto& group_clusters = c.group_cluster_offsets();
+    const auto& group_influence_offsets = c.group_influence_offsets();
+    const auto& group_influences = c.group_influences();
+    const auto& cluster_vertex_offsets = c.cluster_vertex_offsets();
+    const auto& cluster_vertices = c.cluster_vertices();
+    const auto& cluster_influence_offsets = c.cluster_influence_offsets();
+    const auto& cluster_influences = c.cluster_influences();
 
-  std::vector<int> frame_order(frames);
-  std::iota(frame_order.begin(), frame_order.end(), 0);
-  std::sort(frame_order.begin(), frame_order.end(),
-            [&](int a, int b) { return bounds.frame_bound[a] > bounds.frame_bound[b]; });
+    std::vector<int> frame_order(frames);
+    std::iota(frame_order.begin(), frame_order.end(), 0);
+    std::sort(frame_order.begin(), frame_order.end(),
+              [&](int a, int b) { return bounds.frame_bound[a] > bounds.frame_bound[b]; });
 
-  float best_squared = start.best_squared;  // the float |d_i|^2 whose root is `best`
-  double best = std::sqrt(static_cast<double>(best_squared));
-  int best_frame = start.frame, best_vertex = start.vertex;
-  // Nothing at or below `floor` is refined: negligible, or within the decision's bound.
-  const double floor = std::max(kNegligible * c.height(), std::isfinite(decide_within) ? decide_within : 0.0);
-  // The exact evaluations blend in float (the skin's own precision): twice the throughput,
-  // and the figure is a display quantity.
-  std::vector<Affine34d> frame_delta(n);
-  std::vector<PaddedDelta> frame_delta_f(n, PaddedDelta::Zero());
-  std::vector<int> group_order;
-  group_order.reserve(n);
-  // A lambda, so that a decided search returns from every loop at once.
-  const auto search = [&] {
-    for (int t : frame_order) {
-      if (bounds.frame_bound[t] <= std::max(best, floor)) break;
-      for (int k : bounds.joints) {
-        frame_delta[k] = delta.At(k, t);
-        frame_delta_f[k].topRows<3>() = frame_delta[k].cast<float>();
-      }
-      const double* bound = bounds.group_bound.data() + static_cast<size_t>(t) * n;
-      const Vec3d* norms = bounds.column_norms.data() + static_cast<size_t>(t) * n;
-      // Only the groups that can beat the best so far, by decreasing bound.
-      group_order.clear();
-      for (int j : bounds.groups) {
-        if (bound[j] > std::max(best, floor)) group_order.push_back(j);
-      }
-      std::sort(group_order.begin(), group_order.end(), [&](int a, int b) { return bound[a] > bound[b]; });
-      for (int j : group_order) {
-        if (bound[j] <= std::max(best, floor)) break;
-        const Vec3d& group_center = c.group_centers()[j];
-        const Vec3d& group_half = c.group_half_extents()[j];
-        const double refined = WeightedBound(
-            group_influences.data() + group_influence_offsets[j],
-            group_influences.data() + group_influence_offsets[j + 1],
-            [&](int g) { return BoxBound(frame_delta[g], norms[g], group_center, group_half); });
-        if (refined <= std::max(best, floor)) continue;
-        for (uint32_t cluster = group_clusters[j]; cluster < group_clusters[j + 1]; ++cluster) {
-          if (cluster_mask != nullptr && !(*cluster_mask)[cluster]) continue;
-          const Vec3d& center = c.cluster_centers()[cluster];
-          const Vec3d& half = c.cluster_half_extents()[cluster];
-          const double cluster_bound = WeightedBound(
-              cluster_influences.data() + cluster_influence_offsets[cluster],
-              cluster_influences.data() + cluster_influence_offsets[cluster + 1],
-              [&](int g) { return BoxBound(frame_delta[g], norms[g], center, half); });
-          if (cluster_bound <= std::max(best, floor)) continue;
-          for (uint32_t e = cluster_vertex_offsets[cluster]; e < cluster_vertex_offsets[cluster + 1]; ++e) {
-            const uint32_t i = cluster_vertices[e];
-            PaddedDelta blended = PaddedDelta::Zero();
-            for (uint32_t g = skin.influence_offsets[i]; g < skin.influence_offsets[i + 1]; ++g) {
-              blended.noalias() += skin.influence_weights[g] * frame_delta_f[skin.influence_joints[g]];
-            }
-            // Compared squared (sqrt is monotonic): the square root, its conversion and a
-            // compare with `best` in memory were a fifth of the search's time per vertex.
-            const float length_squared =
-                (blended.leftCols<3>() * skin.positions[i] + blended.col(3)).squaredNorm();
-            if (length_squared > best_squared) {
-              best_squared = length_squared;
-              best = std::sqrt(static_cast<double>(length_squared));
-              best_frame = t;
-              best_vertex = static_cast<int>(i);
-              if (best > decide_within) return;
+    float best_squared = start.best_squared;  // the float |d_i|^2 whose root is `best`
+    double best = std::sqrt(static_cast<double>(best_squared));
+    int best_frame = start.frame, best_vertex = start.vertex;
+    // Nothing at or below `floor` is refined: negligible, or within the decision's bound.
+    const double floor =
+        std::max(kNegligible * c.height(), std::isfinite(decide_within) ? decide_within : 0.0);
+    // The exact evaluations blend in float (the skin's own precision): twice the throughput,
+    // and the figure is a display quantity.
+    std::vector<Affine34d> frame_delta(n);
+    std::vector<PaddedDelta> frame_delta_f(n, PaddedDelta::Zero());
+    std::vector<int> group_order;
+    group_order.reserve(n);
+    // A lambda, so that a decided search returns from every loop at once.
+    const auto search = [&] {
+      for (int t : frame_order) {
+        if (bounds.frame_bound[t] <= std::max(best, floor)) break;
+        for (int k : bounds.joints) {
+          frame_delta[k] = delta.At(k, t);
+          frame_delta_f[k].topRows<3>() = frame_delta[k].cast<float>();
+        }
+        const double* bound = bounds.group_bound.data() + static_cast<size_t>(t) * n;
+        const Vec3d* norms = bounds.column_norms.data() + static_cast<size_t>(t) * n;
+        // Only the groups that can beat the best so far, by decreasing bound.
+        group_order.clear();
+        for (int j : bounds.groups) {
+          if (bound[j] > std::max(best, floor)) group_order.push_back(j);
+        }
+        std::sort(group_order.begin(), group_order.end(),
+                  [&](int a, int b) { return bound[a] > bound[b]; });
+        for (int j : group_order) {
+          if (bound[j] <= std::max(best, floor)) break;
+          const Vec3d& group_center = c.group_centers()[j];
+          const Vec3d& group_half = c.group_half_extents()[j];
+          const double refined = WeightedBound(
+              group_influences.data() + group_influence_offsets[j],
+              group_influences.data() + group_influence_offsets[j + 1],
+              [&](int g) { return BoxBound(frame_delta[g], norms[g], group_center, group_half); });
+          if (refined <= std::max(best, floor)) continue;
+          for (uint32_t cluster = group_clusters[j]; cluster < group_clusters[j + 1]; ++cluster) {
+            if (cluster_mask != nullptr && !(*cluster_mask)[cluster]) continue;
+            const Vec3d& center = c.cluster_centers()[cluster];
+            const Vec3d& half = c.cluster_half_extents()[cluster];
+            const double cluster_bound = WeightedBound(
+                cluster_influences.data() + cluster_influence_offsets[cluster],
+                cluster_influences.data() + cluster_influence_offsets[cluster + 1],
+                [&](int g) { return BoxBound(frame_delta[g], norms[g], center, half); });
+            if (cluster_bound <= std::max(best, floor)) continue;
+            for (uint32_t e = cluster_vertex_offsets[cluster];
+                 e < cluster_vertex_offsets[cluster + 1]; ++e) {
+              const uint32_t i = cluster_vertices[e];
+              PaddedDelta blended = PaddedDelta::Zero();
+              for (uint32_t g = skin.influence_offsets[i]; g < skin.influence_offsets[i + 1]; ++g) {
+                blended.noalias() +=
+                    skin.influence_weights[g] * frame_delta_f[skin.influence_joints[g]];
+              }
+              // Compared squared (sqrt is monotonic): the square root, its conversion and a
+              // compare with `best` in memory were a fifth of the search's time per vertex.
+              const float length_squared =
+                  (blended.leftCols<3>() * skin.positions[i] + blended.col(3)).squaredNorm();
+              if (length_squared > best_squared) {
+                best_squared = length_squared;
+                best = std::sqrt(static_cast<double>(length_squared));
+                best_frame = t;
+                best_vertex = static_cast<int>(i);
+                if (best > decide_within) return;
+              }
             }
           }
         }
       }
-    }
-  };
-  search();
-  out.max_vertex_error_pct = 100.0 * best / c.height();
-  out.max_vertex_frame = best_frame;
-  out.max_vertex_index = best_vertex;
-  return MaxSearchStart{best_squared, best_frame, best_vertex};
+    };
+    search();
+    out.max_vertex_error_pct = 100.0 * best / c.height();
+    out.max_vertex_frame = best_frame;
+    out.max_vertex_index = best_vertex;
+    return MaxSearchStart{best_squared, best_frame, best_vertex};
+  });
 }
 
 void PreparedMotion::Impl::SampleFrameValues(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame,
                                              size_t q, const std::vector<uint32_t>* vertices,
                                              SampleScratch& scratch, SampleValues& values) const {
-  // Blends in float, as the maximum search: the rounding is relative to Delta itself.
-  std::vector<PaddedDelta>& frame_delta = scratch.frame_delta;
-  for (int k = 0; k < n; ++k) frame_delta[k].topRows<3>() = frame.block<4, 3>(4 * k, 0).transpose().cast<float>();
-  const size_t all = sample_vertices.size();
-  const size_t count = vertices ? vertices->size() : all;
-  const double* normals = sample_normals.data() + 4 * q * all;
-  // A subset's original normals are gathered into rows of its own length, as ChordAngles
-  // reads them.
-  if (vertices) {
+  RunWithWidestSimd([&] {
+    // Blends in float, as the maximum search: the rounding is relative to Delta itself.
+    std::vector<PaddedDelta>& frame_delta = scratch.frame_delta;
+    for (int k = 0; k < n; ++k)
+      frame_delta[k].topRows<3>() = frame.block<4, 3>(4 * k, 0).transpose().cast<float>();
+    const size_t all = sample_vertices.size();
+    const size_t count = vertices ? vertices->size() : all;
+    const double* normals = sample_normals.data() + 4 * q * all;
+    // A subset's original normals are gathered into rows of its own length, as ChordAngles
+    // reads them.
+    if (vertices) {
+      for (size_t e = 0; e < count; ++e) {
+        for (int row = 0; row < 4; ++row)
+          scratch.normals[row * count + e] = normals[row * all + (*vertices)[e]];
+      }
+      normals = scratch.normals.data();
+    }
     for (size_t e = 0; e < count; ++e) {
-      for (int row = 0; row < 4; ++row) scratch.normals[row * count + e] = normals[row * all + (*vertices)[e]];
+      const size_t v = vertices ? (*vertices)[e] : e;
+      const SampleVertex& sample = sample_vertices[v];
+      PaddedDelta blended = PaddedDelta::Zero();
+      for (uint32_t g = v == 0 ? 0 : sample_vertices[v - 1].influence_end; g < sample.influence_end;
+           ++g) {
+        blended.noalias() += sample_influences[g].weight * frame_delta[sample_influences[g].joint];
+      }
+      const Eigen::Vector4d d =
+          (blended.leftCols<3>() * sample.position + blended.col(3)).cast<double>();
+      const Eigen::Vector4d dn = (blended.leftCols<3>() * sample.normal).cast<double>();
+      values.distance_squared[v] = d.squaredNorm();
+      values.normal_squared[v] = dn.x() * dn.x() + dn.y() * dn.y() + dn.z() * dn.z();
+      scratch.normal_x[e] = dn.x();
+      scratch.normal_y[e] = dn.y();
+      scratch.normal_z[e] = dn.z();
     }
-    normals = scratch.normals.data();
-  }
-  for (size_t e = 0; e < count; ++e) {
-    const size_t v = vertices ? (*vertices)[e] : e;
-    const SampleVertex& sample = sample_vertices[v];
-    PaddedDelta blended = PaddedDelta::Zero();
-    for (uint32_t g = v == 0 ? 0 : sample_vertices[v - 1].influence_end; g < sample.influence_end; ++g) {
-      blended.noalias() += sample_influences[g].weight * frame_delta[sample_influences[g].joint];
+    ChordAngles(count, normals, scratch.normal_x.data(), scratch.normal_y.data(),
+                scratch.normal_z.data(), scratch.angle.data());
+    for (size_t e = 0; e < count; ++e) {
+      double angle = scratch.angle[e];
+      // Past the series, or no direction to compare (n or n + dn zero: no angle).
+      if (!(angle >= 0)) angle = std::isnan(angle) ? 0.0 : 2 * std::asin(std::min(-angle, 1.0));
+      values.angle[vertices ? (*vertices)[e] : e] = angle;
     }
-    const Eigen::Vector4d d = (blended.leftCols<3>() * sample.position + blended.col(3)).cast<double>();
-    const Eigen::Vector4d dn = (blended.leftCols<3>() * sample.normal).cast<double>();
-    values.distance_squared[v] = d.squaredNorm();
-    values.normal_squared[v] = dn.x() * dn.x() + dn.y() * dn.y() + dn.z() * dn.z();
-    scratch.normal_x[e] = dn.x();
-    scratch.normal_y[e] = dn.y();
-    scratch.normal_z[e] = dn.z();
-  }
-  ChordAngles(count, normals, scratch.normal_x.data(), scratch.normal_y.data(), scratch.normal_z.data(),
-              scratch.angle.data());
-  for (size_t e = 0; e < count; ++e) {
-    double angle = scratch.angle[e];
-    // Past the series, or no direction to compare (n or n + dn zero: no angle).
-    if (!(angle >= 0)) angle = std::isnan(angle) ? 0.0 : 2 * std::asin(std::min(-angle, 1.0));
-    values.angle[vertices ? (*vertices)[e] : e] = angle;
-  }
+  });
 }
 
 void PreparedMotion::Impl::AddSampleSums(const SampleValues& values, SampleSums& sums) const {
@@ -996,69 +1014,73 @@ struct VariantSolution {
 };
 
 StatusOr<VariantSolution> SolveVariant(const PreparedMotion::Impl& d, const ReducedSkeleton& level) {
-  auto system = SolveSystem(d, level);
-  if (!system.ok()) return system.status();
-  const int n = d.n;
-  const int m = level.kept_count();
-  const int cols = 3 * d.frames;
-  const BlockSymmetric<4>& g = system->g;
-  const MatrixXd& bt = system->bt;
-  MatrixXd& x = system->x;
+  return RunWithWidestSimd([&]() -> StatusOr<VariantSolution> {
+    auto system = SolveSystem(d, level);
+    if (!system.ok()) return system.status();
+    const int n = d.n;
+    const int m = level.kept_count();
+    const int cols = 3 * d.frames;
+    const BlockSymmetric<4>& g = system->g;
+    const MatrixXd& bt = system->bt;
+    MatrixXd& x = system->x;
 
-  // With every joint kept, original matrices that are rotations already (to within their
-  // source's float precision) are the constrained minimiser too (no residual): keep them
-  // bit for bit, as the fitted variants do, instead of projecting them by a few 1e-6,
-  // re-solving them and measuring an error of 1e-13.
-  const bool projected = IsRigid(d.settings.variant) && !(m == n && AllRotations(x));
-  // The full level's solution is the original matrices themselves (SolveSystem).
-  const bool unchanged = m == n && !projected;
-  if (projected) {
-    // x holds each K'^T: the polar factor of a transpose is the transpose of the factor.
-    std::vector<Eigen::Matrix3d> rotations(static_cast<size_t>(d.frames) * m);
-    for (int t = 0; t < d.frames; ++t) {
-      for (int s = 0; s < m; ++s) rotations[static_cast<size_t>(t) * m + s] = x.block<3, 3>(4 * s, 3 * t);
-    }
-    NearestRotations(rotations);
-    for (int t = 0; t < d.frames; ++t) {
-      for (int s = 0; s < m; ++s) x.block<3, 3>(4 * s, 3 * t) = rotations[static_cast<size_t>(t) * m + s];
-    }
-    if (d.settings.resolve_rigid_translation) {
-      // x_T = G_TT^-1 (b_T - G_TN x_N): translations are rows 4s+3, the rest is fixed.
-      // The right-hand sides transposed, as SolveTransposed takes them: b_T^T - x_N^T G_TN^T.
-      // G_TT and G_TN keep G's block sparsity: G_TT is a block matrix of 1x1 blocks, and
-      // each coefficient of G_TN subtracts one contiguous column of all frames.
-      // Transposed copies are made column by column of x: reading a row of x would touch
-      // one cache line per column, every line of a long motion's x for each row.
-      MatrixXd x_nt(cols, 3 * m);
-      for (int col = 0; col < cols; ++col) {
+    // With every joint kept, original matrices that are rotations already (to within their
+    // source's float precision) are the constrained minimiser too (no residual): keep them
+    // bit for bit, as the fitted variants do, instead of projecting them by a few 1e-6,
+    // re-solving them and measuring an error of 1e-13.
+    const bool projected = IsRigid(d.settings.variant) && !(m == n && AllRotations(x));
+    // The full level's solution is the original matrices themselves (SolveSystem).
+    const bool unchanged = m == n && !projected;
+    if (projected) {
+      // x holds each K'^T: the polar factor of a transpose is the transpose of the factor.
+      std::vector<Eigen::Matrix3d> rotations(static_cast<size_t>(d.frames) * m);
+      for (int t = 0; t < d.frames; ++t) {
+        for (int s = 0; s < m; ++s)
+          rotations[static_cast<size_t>(t) * m + s] = x.block<3, 3>(4 * s, 3 * t);
+      }
+      NearestRotations(rotations);
+      for (int t = 0; t < d.frames; ++t) {
+        for (int s = 0; s < m; ++s)
+          x.block<3, 3>(4 * s, 3 * t) = rotations[static_cast<size_t>(t) * m + s];
+      }
+      if (d.settings.resolve_rigid_translation) {
+        // x_T = G_TT^-1 (b_T - G_TN x_N): translations are rows 4s+3, the rest is fixed.
+        // The right-hand sides transposed, as SolveTransposed takes them: b_T^T - x_N^T G_TN^T.
+        // G_TT and G_TN keep G's block sparsity: G_TT is a block matrix of 1x1 blocks, and
+        // each coefficient of G_TN subtracts one contiguous column of all frames.
+        // Transposed copies are made column by column of x: reading a row of x would touch
+        // one cache line per column, every line of a long motion's x for each row.
+        MatrixXd x_nt(cols, 3 * m);
+        for (int col = 0; col < cols; ++col) {
+          for (int s = 0; s < m; ++s) {
+            for (int r = 0; r < 3; ++r) x_nt(col, 3 * s + r) = x(4 * s + r, col);
+          }
+        }
+        BlockSymmetric<1> g_tt(m);
+        MatrixXd x_tt(cols, m);
+        const auto subtract_g_tn = [&](int s, int u, const Eigen::Matrix4d& g_su) {
+          for (int r = 0; r < 3; ++r) x_tt.col(s).noalias() -= g_su(3, r) * x_nt.col(3 * u + r);
+        };
         for (int s = 0; s < m; ++s) {
-          for (int r = 0; r < 3; ++r) x_nt(col, 3 * s + r) = x(4 * s + r, col);
+          x_tt.col(s) = bt.col(4 * s + 3);
+          g_tt.AddDiagonal(s, g.diagonal(s).bottomRightCorner<1, 1>());
+          subtract_g_tn(s, s, g.diagonal(s));
+        }
+        for (const auto& block : g.lower()) {  // G(row, col) and its transpose G(col, row)
+          g_tt.AddPair(block.row, block.col, block.value.bottomRightCorner<1, 1>());
+          subtract_g_tn(block.row, block.col, block.value);
+          subtract_g_tn(block.col, block.row, block.value.transpose());
+        }
+        auto factor = BlockCholesky<1>::Factor(g_tt);
+        if (!factor.ok()) return factor.status();
+        const MatrixXd translations = factor->SolveTransposed(x_tt);
+        for (int col = 0; col < cols; ++col) {
+          for (int s = 0; s < m; ++s) x(4 * s + 3, col) = translations(s, col);
         }
       }
-      BlockSymmetric<1> g_tt(m);
-      MatrixXd x_tt(cols, m);
-      const auto subtract_g_tn = [&](int s, int u, const Eigen::Matrix4d& g_su) {
-        for (int r = 0; r < 3; ++r) x_tt.col(s).noalias() -= g_su(3, r) * x_nt.col(3 * u + r);
-      };
-      for (int s = 0; s < m; ++s) {
-        x_tt.col(s) = bt.col(4 * s + 3);
-        g_tt.AddDiagonal(s, g.diagonal(s).bottomRightCorner<1, 1>());
-        subtract_g_tn(s, s, g.diagonal(s));
-      }
-      for (const auto& block : g.lower()) {  // G(row, col) and its transpose G(col, row)
-        g_tt.AddPair(block.row, block.col, block.value.bottomRightCorner<1, 1>());
-        subtract_g_tn(block.row, block.col, block.value);
-        subtract_g_tn(block.col, block.row, block.value.transpose());
-      }
-      auto factor = BlockCholesky<1>::Factor(g_tt);
-      if (!factor.ok()) return factor.status();
-      const MatrixXd translations = factor->SolveTransposed(x_tt);
-      for (int col = 0; col < cols; ++col) {
-        for (int s = 0; s < m; ++s) x(4 * s + 3, col) = translations(s, col);
-      }
     }
-  }
-  return VariantSolution{std::move(x), unchanged};
+    return VariantSolution{std::move(x), unchanged};
+  });
 }
 
 }  // namespace
@@ -1145,126 +1167,137 @@ BaselineSequence::BaselineSequence(std::shared_ptr<const PreparedMotion> prepare
 BaselineSequence::~BaselineSequence() = default;
 
 StatusOr<LevelErrors> BaselineSequence::Next(const ReducedSkeleton& level) {
-  State& st = *state_;
-  const PreparedMotion::Impl& d = *st.prepared->impl_;
-  const Character& c = *d.character;
-  const int n = d.n;
-  if (Status status = ValidateLevel(level, n); !status.ok()) return status;
-  std::vector<uint8_t> kept(n, 0);
-  for (int j : level.kept_joints) {
-    if (!st.kept[j]) {
-      return InvalidArgument("BaselineSequence: the level keeps joint '" + c.skeleton().joint_names[j] +
-                             "', which the level before it removed");
-    }
-    kept[j] = 1;
-  }
-  const PreparedMotion::Impl::DeltaView delta = d.BaselineDelta(level);
-  // The joints whose Delta changes: those whose nearest kept joint does.
-  std::vector<uint8_t> changed(n, 0);
-  bool any_changed = false;
-  for (int k = 0; k < n; ++k) {
-    changed[k] = delta.solution_row[k] != st.solution_row[k];
-    any_changed = any_changed || changed[k];
-  }
-  st.kept = std::move(kept);
-  st.solution_row = delta.solution_row;
-  if (!any_changed) return st.last;
-
-  const auto weighted_by_changed = [&](const auto* begin, const auto* end) {
-    return std::any_of(begin, end, [&](const auto& influence) { return changed[influence.joint] != 0; });
-  };
-  std::vector<size_t> changed_pairs;
-  for (size_t q = 0; q < d.pairs.size(); ++q) {
-    if (changed[d.pairs[q].first] || changed[d.pairs[q].second]) changed_pairs.push_back(q);
-  }
-  const std::vector<size_t> active_pairs = d.ActivePairs(delta);
-  std::vector<uint8_t> group_mask(n, 0);
-  for (int j = 0; j < n; ++j) {
-    group_mask[j] = weighted_by_changed(c.group_influences().data() + c.group_influence_offsets()[j],
-                                        c.group_influences().data() + c.group_influence_offsets()[j + 1]);
-  }
-  const size_t clusters = c.cluster_centers().size();
-  std::vector<uint8_t> cluster_mask(clusters, 0);
-  for (size_t cluster = 0; cluster < clusters; ++cluster) {
-    cluster_mask[cluster] =
-        weighted_by_changed(c.cluster_influences().data() + c.cluster_influence_offsets()[cluster],
-                            c.cluster_influences().data() + c.cluster_influence_offsets()[cluster + 1]);
-  }
-  std::vector<uint32_t> changed_samples;
-  for (size_t v = 0; v < d.sample_vertices.size(); ++v) {
-    const uint32_t begin = v == 0 ? 0 : d.sample_vertices[v - 1].influence_end;
-    if (weighted_by_changed(d.sample_influences.data() + begin,
-                            d.sample_influences.data() + d.sample_vertices[v].influence_end)) {
-      changed_samples.push_back(static_cast<uint32_t>(v));
-    }
-  }
-  // The vertices that no changed joint weights keep their errors, all at most the last
-  // maximum: a search of the others from it finds the new one, unless the vertex that
-  // attained it has changed (then every cluster is searched again). With no maximum yet
-  // (none above the negligible), the unchanged vertices are all negligible.
-  const RawSkin& skin = c.skin();
-  const int last_vertex = st.maximum.vertex;
-  bool restart = false;
-  for (uint32_t g = skin.influence_offsets[last_vertex];
-       st.maximum.best_squared > 0 && g < skin.influence_offsets[last_vertex + 1]; ++g) {
-    restart = restart || changed[skin.influence_joints[g]];
-  }
-
-  LevelErrors out;
-  out.e.assign(d.frames, 0.0);
-  out.ep_vertex.assign(d.frames, 0.0);
-  out.ep_joint.assign(d.frames, 0.0);  // kept joints keep their matrices: no joint error
-  out.en_vertex.assign(d.frames, 0.0);
-  out.en_joint.assign(d.frames, 0.0);
-  PreparedMotion::Impl::MaxSearchBounds bounds = d.MakeMaxSearchBounds(restart ? nullptr : &group_mask);
-  PreparedMotion::Impl::SampleScratch scratch(n, changed_samples.size());
-  size_t next_sample = 0;
-  const size_t pair_count = d.pairs.size();
-  // Only the joints whose Delta is read: the changed pairs', the bounded groups' and the
-  // changed sampled vertices'.
-  std::vector<uint8_t> read(n, 0);
-  for (size_t q : changed_pairs) read[d.pairs[q].first] = read[d.pairs[q].second] = 1;
-  for (int k : bounds.joints) read[k] = 1;
-  for (uint32_t v : changed_samples) {
-    for (uint32_t g = v == 0 ? 0 : d.sample_vertices[v - 1].influence_end; g < d.sample_vertices[v].influence_end; ++g) {
-      read[d.sample_influences[g].joint] = 1;
-    }
-  }
-  std::vector<int> read_joints;
-  for (int k = 0; k < n; ++k) {
-    if (read[k]) read_joints.push_back(k);
-  }
-  Eigen::Matrix<double, Eigen::Dynamic, 3> frame = Eigen::Matrix<double, Eigen::Dynamic, 3>::Zero(4 * n, 3);
-  for (int t = 0; t < d.frames; ++t) {
-    delta.Frame(t, read_joints, frame);
-    double* pair_p = st.pair_p.data() + static_cast<size_t>(t) * pair_count;
-    double* pair_n = st.pair_n.data() + static_cast<size_t>(t) * pair_count;
-    for (size_t q : changed_pairs) std::tie(pair_p[q], pair_n[q]) = d.PairTerms(frame, q);
-    // Summed as EvaluateErrors sums them over joint pairs.
-    double ep = 0, en = 0;
-    for (size_t q : active_pairs) {
-      ep += pair_p[q];
-      en += pair_n[q];
-    }
-    out.ep_vertex[t] = std::max(0.0, ep);
-    out.en_vertex[t] = std::max(0.0, en);
-    out.e[t] = d.alpha * (out.ep_vertex[t] + out.ep_joint[t]) + d.beta * (out.en_vertex[t] + out.en_joint[t]);
-    d.FrameBounds(frame, t, bounds);
-    if (next_sample < d.sample_frames.size() && d.sample_frames[next_sample] == t) {
-      if (!changed_samples.empty()) {
-        d.SampleFrameValues(frame, next_sample, &changed_samples, scratch, st.sample_values[next_sample]);
+  return RunWithWidestSimd([&]() -> StatusOr<LevelErrors> {
+    State& st = *state_;
+    const PreparedMotion::Impl& d = *st.prepared->impl_;
+    const Character& c = *d.character;
+    const int n = d.n;
+    if (Status status = ValidateLevel(level, n); !status.ok()) return status;
+    std::vector<uint8_t> kept(n, 0);
+    for (int j : level.kept_joints) {
+      if (!st.kept[j]) {
+        return InvalidArgument("BaselineSequence: the level keeps joint '" +
+                               c.skeleton().joint_names[j] +
+                               "', which the level before it removed");
       }
-      ++next_sample;
+      kept[j] = 1;
     }
-  }
-  st.maximum = d.MaxVertexError(delta, bounds, std::numeric_limits<double>::infinity(),
-                                restart ? PreparedMotion::Impl::MaxSearchStart{} : st.maximum,
-                                restart ? nullptr : &cluster_mask, out);
-  PreparedMotion::Impl::SampleSums sums;
-  for (const PreparedMotion::Impl::SampleValues& values : st.sample_values) d.AddSampleSums(values, sums);
-  d.FinishErrors(&sums, out);
-  st.last = out;
-  return out;
+    const PreparedMotion::Impl::DeltaView delta = d.BaselineDelta(level);
+    // The joints whose Delta changes: those whose nearest kept joint does.
+    std::vector<uint8_t> changed(n, 0);
+    bool any_changed = false;
+    for (int k = 0; k < n; ++k) {
+      changed[k] = delta.solution_row[k] != st.solution_row[k];
+      any_changed = any_changed || changed[k];
+    }
+    st.kept = std::move(kept);
+    st.solution_row = delta.solution_row;
+    if (!any_changed) return st.last;
+
+    const auto weighted_by_changed = [&](const auto* begin, const auto* end) {
+      return std::any_of(begin, end,
+                         [&](const auto& influence) { return changed[influence.joint] != 0; });
+    };
+    std::vector<size_t> changed_pairs;
+    for (size_t q = 0; q < d.pairs.size(); ++q) {
+      if (changed[d.pairs[q].first] || changed[d.pairs[q].second]) changed_pairs.push_back(q);
+    }
+    const std::vector<size_t> active_pairs = d.ActivePairs(delta);
+    std::vector<uint8_t> group_mask(n, 0);
+    for (int j = 0; j < n; ++j) {
+      group_mask[j] =
+          weighted_by_changed(c.group_influences().data() + c.group_influence_offsets()[j],
+                              c.group_influences().data() + c.group_influence_offsets()[j + 1]);
+    }
+    const size_t clusters = c.cluster_centers().size();
+    std::vector<uint8_t> cluster_mask(clusters, 0);
+    for (size_t cluster = 0; cluster < clusters; ++cluster) {
+      cluster_mask[cluster] = weighted_by_changed(
+          c.cluster_influences().data() + c.cluster_influence_offsets()[cluster],
+          c.cluster_influences().data() + c.cluster_influence_offsets()[cluster + 1]);
+    }
+    std::vector<uint32_t> changed_samples;
+    for (size_t v = 0; v < d.sample_vertices.size(); ++v) {
+      const uint32_t begin = v == 0 ? 0 : d.sample_vertices[v - 1].influence_end;
+      if (weighted_by_changed(d.sample_influences.data() + begin,
+                              d.sample_influences.data() + d.sample_vertices[v].influence_end)) {
+        changed_samples.push_back(static_cast<uint32_t>(v));
+      }
+    }
+    // The vertices that no changed joint weights keep their errors, all at most the last
+    // maximum: a search of the others from it finds the new one, unless the vertex that
+    // attained it has changed (then every cluster is searched again). With no maximum yet
+    // (none above the negligible), the unchanged vertices are all negligible.
+    const RawSkin& skin = c.skin();
+    const int last_vertex = st.maximum.vertex;
+    bool restart = false;
+    for (uint32_t g = skin.influence_offsets[last_vertex];
+         st.maximum.best_squared > 0 && g < skin.influence_offsets[last_vertex + 1]; ++g) {
+      restart = restart || changed[skin.influence_joints[g]];
+    }
+
+    LevelErrors out;
+    out.e.assign(d.frames, 0.0);
+    out.ep_vertex.assign(d.frames, 0.0);
+    out.ep_joint.assign(d.frames, 0.0);  // kept joints keep their matrices: no joint error
+    out.en_vertex.assign(d.frames, 0.0);
+    out.en_joint.assign(d.frames, 0.0);
+    PreparedMotion::Impl::MaxSearchBounds bounds =
+        d.MakeMaxSearchBounds(restart ? nullptr : &group_mask);
+    PreparedMotion::Impl::SampleScratch scratch(n, changed_samples.size());
+    size_t next_sample = 0;
+    const size_t pair_count = d.pairs.size();
+    // Only the joints whose Delta is read: the changed pairs', the bounded groups' and the
+    // changed sampled vertices'.
+    std::vector<uint8_t> read(n, 0);
+    for (size_t q : changed_pairs) read[d.pairs[q].first] = read[d.pairs[q].second] = 1;
+    for (int k : bounds.joints) read[k] = 1;
+    for (uint32_t v : changed_samples) {
+      for (uint32_t g = v == 0 ? 0 : d.sample_vertices[v - 1].influence_end;
+           g < d.sample_vertices[v].influence_end; ++g) {
+        read[d.sample_influences[g].joint] = 1;
+      }
+    }
+    std::vector<int> read_joints;
+    for (int k = 0; k < n; ++k) {
+      if (read[k]) read_joints.push_back(k);
+    }
+    Eigen::Matrix<double, Eigen::Dynamic, 3> frame =
+        Eigen::Matrix<double, Eigen::Dynamic, 3>::Zero(4 * n, 3);
+    for (int t = 0; t < d.frames; ++t) {
+      delta.Frame(t, read_joints, frame);
+      double* pair_p = st.pair_p.data() + static_cast<size_t>(t) * pair_count;
+      double* pair_n = st.pair_n.data() + static_cast<size_t>(t) * pair_count;
+      for (size_t q : changed_pairs) std::tie(pair_p[q], pair_n[q]) = d.PairTerms(frame, q);
+      // Summed as EvaluateErrors sums them over joint pairs.
+      double ep = 0, en = 0;
+      for (size_t q : active_pairs) {
+        ep += pair_p[q];
+        en += pair_n[q];
+      }
+      out.ep_vertex[t] = std::max(0.0, ep);
+      out.en_vertex[t] = std::max(0.0, en);
+      out.e[t] = d.alpha * (out.ep_vertex[t] + out.ep_joint[t]) +
+                 d.beta * (out.en_vertex[t] + out.en_joint[t]);
+      d.FrameBounds(frame, t, bounds);
+      if (next_sample < d.sample_frames.size() && d.sample_frames[next_sample] == t) {
+        if (!changed_samples.empty()) {
+          d.SampleFrameValues(frame, next_sample, &changed_samples, scratch,
+                              st.sample_values[next_sample]);
+        }
+        ++next_sample;
+      }
+    }
+    st.maximum = d.MaxVertexError(delta, bounds, std::numeric_limits<double>::infinity(),
+                                  restart ? PreparedMotion::Impl::MaxSearchStart{} : st.maximum,
+                                  restart ? nullptr : &cluster_mask, out);
+    PreparedMotion::Impl::SampleSums sums;
+    for (const PreparedMotion::Impl::SampleValues& values : st.sample_values)
+      d.AddSampleSums(values, sums);
+    d.FinishErrors(&sums, out);
+    st.last = out;
+    return out;
+  });
 }
 
 StatusOr<bool> PreparedMotion::MaxVertexErrorWithin(const ReducedSkeleton& level, double bound_pct) const {

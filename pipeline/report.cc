@@ -4,6 +4,7 @@
 #include <limits>
 #include <numeric>
 
+#include "base/simd.h"
 #include "core/level_selection.h"
 
 namespace motionlod::pipeline {
@@ -107,7 +108,8 @@ json BuildReport(const ReportInputs& in) {
   report["timing"] = {{"bake_seconds", in.bake_seconds},
                       {"skinning_pass_seconds", in.skinning_pass_seconds},
                       {"bake_over_skinning_pass", in.skinning_pass_seconds > 0 ? in.bake_seconds / in.skinning_pass_seconds : 0.0},
-                      {"threads", in.threads}};
+                      {"threads", in.threads},
+                      {"simd", std::string(SimdVersionName())}};
   json levels = json::array();
   for (int count : in.counts) {
     const core::LevelResult& r = in.levels.at(count);

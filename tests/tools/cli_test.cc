@@ -1,6 +1,7 @@
 // The motionlod command as users run it: a real process, real files, exit codes.
 #include <sys/wait.h>
 
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -23,8 +24,9 @@ struct ProcessResult {
   std::string output;  // stdout and stderr
 };
 
-ProcessResult Exec(const std::string& args) {
-  const std::string command = std::string(MOTIONLOD_TOOL) + " " + args + " 2>&1";
+// `environment`: assignments put before the command, e.g. "MOTIONLOD_SIMD=baseline".
+ProcessResult Exec(const std::string& args, const std::string& environment = "") {
+  const std::string command = environment + " " + std::string(MOTIONLOD_TOOL) + " " + args + " 2>&1";
   ProcessResult run;
   FILE* pipe = ::popen(command.c_str(), "r");
   if (pipe == nullptr) return run;
@@ -102,6 +104,40 @@ TEST_F(Cli, BakesTheSampleWithTheDefaultLadder) {
   const std::string svg = ReadAll(dir_ / "fig.svg");
   EXPECT_NE(svg.find("<polyline"), std::string::npos);
   EXPECT_NE(svg.find("vpno+pd"), std::string::npos);
+}
+
+// Both machine versions of the hot loops (base/simd.h) bake the same levels: the figures
+// agree to the rounding of fused multiply-adds. On a CPU without AVX2 and FMA both runs
+// are the baseline version.
+TEST_F(Cli, TheAvx2AndBaselineVersionsReportTheSameFigures) {
+  nlohmann::json reports[2];
+  for (int forced = 0; forced < 2; ++forced) {
+    const fs::path out = dir_ / (forced ? "baseline" : "widest");
+    const ProcessResult bake =
+        Exec("bake " + Sample() + " --threads 2 --animation Walking_A --all-levels --out " + out.string(),
+             forced ? "MOTIONLOD_SIMD=baseline" : "");
+    ASSERT_EQ(bake.exit_code, 0) << bake.output;
+    reports[forced] = nlohmann::json::parse(ReadAll(out / "report.json"));
+  }
+  const nlohmann::json& widest = reports[0];
+  const nlohmann::json& baseline = reports[1];
+  EXPECT_EQ(baseline["timing"]["simd"], "baseline");
+  const std::string widest_name = widest["timing"]["simd"].get<std::string>();
+  EXPECT_TRUE(widest_name == "avx2-fma" || widest_name == "baseline" || widest_name == "native")
+      << widest_name;
+  ASSERT_EQ(widest["levels"].size(), 23u);
+  ASSERT_EQ(baseline["levels"].size(), 23u);
+  for (size_t l = 0; l < 23; ++l) {
+    const nlohmann::json& a = widest["levels"][l];
+    const nlohmann::json& b = baseline["levels"][l];
+    EXPECT_EQ(a["removed"], b["removed"]);
+    for (const char* field : {"mean_E", "baseline_mean_E", "max_vertex_error_pct",
+                              "baseline_max_vertex_error_pct", "mean_vertex_error_pct",
+                              "mean_normal_error_deg"}) {
+      const double x = a[field].get<double>(), y = b[field].get<double>();
+      EXPECT_NEAR(x, y, 1e-5 * std::abs(x) + 1e-9) << field << " at " << a["joints"] << " joints";
+    }
+  }
 }
 
 TEST_F(Cli, RankPrintsTheRemovalOrderWithTheRootLast) {
