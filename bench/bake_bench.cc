@@ -54,6 +54,8 @@
 #include <vector>
 
 #include "base/allocator.h"
+#include "base/parallel.h"
+#include "base/simd.h"
 #include "bench/subdivide.h"
 #include "core/character.h"
 #include "core/motion.h"
@@ -64,7 +66,6 @@
 #include "io/asset.h"
 #include "io/retarget.h"
 #include "pipeline/bake.h"
-#include "base/parallel.h"
 #include "pipeline/report.h"
 #include "proto/level_format.h"
 
@@ -760,6 +761,7 @@ int Main(int argc, char** argv) {
   benchmark::Initialize(&rest_argc, rest.data());
   if (benchmark::ReportUnrecognizedArguments(rest_argc, rest.data())) return 2;
   benchmark::AddCustomContext("data_dir", options.data_dir);
+  benchmark::AddCustomContext("simd", std::string(SimdVersionName()));
   benchmark::RunSpecifiedBenchmarks();
   benchmark::Shutdown();
   return 0;

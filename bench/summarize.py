@@ -277,6 +277,8 @@ def machine(context, command):
         f"(Debian's libbenchmark, which reports itself as a debug build: that concerns "
         f"the harness, not the code measured, which is Release `-O3`)",
     ]
+    if context.get("simd"):
+        facts.append(f"- hot loops: the `{context['simd']}` version (base/simd.h)")
     if command:
         facts.append(f"- command: `{command}`")
     return facts

@@ -19,6 +19,7 @@
 #include <thread>
 
 #include "base/allocator.h"
+#include "base/simd.h"
 #include "server/config.h"
 #include "server/http_server.h"
 #include "server/routes.h"
@@ -181,8 +182,8 @@ int Main(int argc, char** argv) {
   const std::string host =
       config.bind.find(':') != std::string::npos ? "[" + config.bind + "]" : config.bind;
   const std::string base_url = "http://" + host + ":" + std::to_string(*port);
-  spdlog::info("listening on {} (data in {}, {} connection threads)", base_url, config.data_dir,
-               config.http_threads);
+  spdlog::info("listening on {} (data in {}, {} connection threads, {} hot loops)", base_url,
+               config.data_dir, config.http_threads, SimdVersionName());
   spdlog::default_logger()->flush();
   std::printf("listening on %s\n", base_url.c_str());
   if (context.web != nullptr) std::printf("web viewer: %s/\n", base_url.c_str());
