@@ -1,6 +1,6 @@
 // Hot loops in two machine versions, picked at run time: the x86-64 baseline (SSE2) that
-// every build runs on, and AVX2 with FMA (x86-64-v3: Intel since Haswell, AMD since
-// Excavator and every Zen). A dispatched function passes its body, as a lambda, to
+// every build runs on, and AVX2 with FMA (x86-64-v3: Intel Core since Haswell, AMD since
+// Excavator). A dispatched function passes its body, as a lambda, to
 // RunWithWidestSimd.
 //
 // How: RunWithAvx2Fma<Body> is compiled with `target("avx2,fma")` and `flatten`, which
@@ -9,15 +9,15 @@
 // width when it is compiled). Nothing else is compiled for AVX2: what cannot be inlined (a
 // function of another file, a recursive one) is called in its baseline version. So no
 // AVX2 instruction runs on a CPU without it, and no inline function (Eigen's templates) is
-// emitted twice under one name for two instruction sets, which per-file `-mavx2` or
-// `target_clones` over Eigen code would do. `noinline` keeps each AVX2 version a single
-// function: a dispatched kernel called from two dispatched callers computes bit for bit the
-// same for both.
+// emitted twice under one name for two instruction sets, as a file compiled with `-mavx2`
+// would (the linker keeps one copy for every caller). `noinline` keeps each AVX2 version a
+// single function: a dispatched kernel called from two dispatched callers computes bit for
+// bit the same for both.
 //
 // A fused multiply-add rounds once where the baseline rounds twice, so the two versions
 // differ in the last bits of their results. MOTIONLOD_SIMD=baseline in the environment
-// forces the baseline version, for bakes that are bit for bit the same on every CPU of a
-// farm, and to test that version on an AVX2 machine; it is read once, at the first call.
+// forces the baseline version, for bakes that are bit for bit the same on every x86-64 CPU
+// of a farm, and to test that version on an AVX2 machine; it is read once, at the first call.
 #pragma once
 
 #include <cstdlib>

@@ -8,7 +8,6 @@
 #include <type_traits>
 #include <utility>
 
-#include "base/simd.h"
 #include "proto/checksum.h"
 #include "proto/level_format_internal.h"
 #include "proto/utf8.h"
@@ -260,58 +259,55 @@ std::string CheckJointMap(size_t l, std::span<const int32_t> parents,
 
 std::string CheckMatrices(size_t l, uint32_t frame_count, size_t m, bool rigid,
                           std::span<const float> matrices) {
-  return RunWithWidestSimd([&]() -> std::string {
-    const uint64_t expected = uint64_t{frame_count} * m * kMatrixFloats;  // < 2^54
-    if (matrices.size() != expected) {
-      return StrCat("level ", l, " has ", matrices.size(),
-                    " matrix floats; T x m x 12 = ", expected);
-    }
-    // One branch-free pass (vectorises); locate the culprit only on failure.
-    bool all_finite = true;
-    for (const float value : matrices) all_finite &= IsFiniteBits(value);
-    if (!all_finite) {
-      for (size_t i = 0; i < matrices.size(); ++i) {
-        if (!IsFiniteBits(matrices[i])) {
-          const size_t matrix = i / kMatrixFloats;
-          return StrCat("level ", l, ": K'(frame ", matrix / m, ", slot ", matrix % m, ") element ",
-                        i % kMatrixFloats, " is not finite (", matrices[i], ")");
-        }
+  const uint64_t expected = uint64_t{frame_count} * m * kMatrixFloats;  // < 2^54
+  if (matrices.size() != expected) {
+    return StrCat("level ", l, " has ", matrices.size(), " matrix floats; T x m x 12 = ", expected);
+  }
+  // One branch-free pass (vectorises); locate the culprit only on failure.
+  bool all_finite = true;
+  for (const float value : matrices) all_finite &= IsFiniteBits(value);
+  if (!all_finite) {
+    for (size_t i = 0; i < matrices.size(); ++i) {
+      if (!IsFiniteBits(matrices[i])) {
+        const size_t matrix = i / kMatrixFloats;
+        return StrCat("level ", l, ": K'(frame ", matrix / m, ", slot ", matrix % m, ") element ",
+                      i % kMatrixFloats, " is not finite (", matrices[i], ")");
       }
     }
-    if (rigid) {
-      // Branch-free over every matrix as above (a branch per matrix costs a rigid
-      // every-level bake 3% of its time); the culprit is located only on failure.
-      const auto is_rotation = [](const float* k) {
-        constexpr double kTolerance = 1e-3;
-        // Columns of A: (k[c], k[4 + c], k[8 + c]).
-        bool orthonormal = true;
-        for (int a = 0; a < 3; ++a) {
-          for (int b = a; b < 3; ++b) {
-            const double dot =
-                double{k[a]} * k[b] + double{k[4 + a]} * k[4 + b] + double{k[8 + a]} * k[8 + b];
-            orthonormal &= std::abs(dot - (a == b ? 1.0 : 0.0)) <= kTolerance;
-          }
+  }
+  if (rigid) {
+    // Branch-free over every matrix as above (a branch per matrix costs a rigid
+    // every-level bake 3% of its time); the culprit is located only on failure.
+    const auto is_rotation = [](const float* k) {
+      constexpr double kTolerance = 1e-3;
+      // Columns of A: (k[c], k[4 + c], k[8 + c]).
+      bool orthonormal = true;
+      for (int a = 0; a < 3; ++a) {
+        for (int b = a; b < 3; ++b) {
+          const double dot =
+              double{k[a]} * k[b] + double{k[4 + a]} * k[4 + b] + double{k[8 + a]} * k[8 + b];
+          orthonormal &= std::abs(dot - (a == b ? 1.0 : 0.0)) <= kTolerance;
         }
-        const double det = double{k[0]} * (double{k[5]} * k[10] - double{k[6]} * k[9]) -
-                           double{k[1]} * (double{k[4]} * k[10] - double{k[6]} * k[8]) +
-                           double{k[2]} * (double{k[4]} * k[9] - double{k[5]} * k[8]);
-        return orthonormal & (det > 0);
-      };
-      const size_t count = matrices.size() / kMatrixFloats;
-      bool all_rotations = true;
-      for (size_t matrix = 0; matrix < count; ++matrix) {
-        all_rotations &= is_rotation(matrices.data() + matrix * kMatrixFloats);
       }
-      for (size_t matrix = 0; !all_rotations && matrix < count; ++matrix) {
-        if (!is_rotation(matrices.data() + matrix * kMatrixFloats)) {
-          return StrCat("level ", l, ": K'(frame ", matrix / m, ", slot ", matrix % m,
-                        ") is not a rotation plus translation, but the level set is flagged "
-                        "rigid");
-        }
+      const double det = double{k[0]} * (double{k[5]} * k[10] - double{k[6]} * k[9]) -
+                         double{k[1]} * (double{k[4]} * k[10] - double{k[6]} * k[8]) +
+                         double{k[2]} * (double{k[4]} * k[9] - double{k[5]} * k[8]);
+      return orthonormal & (det > 0);
+    };
+    const size_t count = matrices.size() / kMatrixFloats;
+    bool all_rotations = true;
+    for (size_t matrix = 0; matrix < count; ++matrix) {
+      all_rotations &= is_rotation(matrices.data() + matrix * kMatrixFloats);
+    }
+    for (size_t matrix = 0; !all_rotations && matrix < count; ++matrix) {
+      if (!is_rotation(matrices.data() + matrix * kMatrixFloats)) {
+        return StrCat("level ", l, ": K'(frame ", matrix / m, ", slot ", matrix % m,
+                      ") is not a rotation plus translation, but the level set is flagged "
+                      "rigid");
       }
     }
-    return {};
-  });
+  }
+  return {};
 }
 
 std::string CheckLevelSet(const LevelSetSource& source, bool allow_unknown_flags,
