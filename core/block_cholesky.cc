@@ -1,8 +1,9 @@
 #include "core/block_cholesky.h"
 
-#include <Eigen/Cholesky>
 #include <algorithm>
 #include <utility>
+
+#include <Eigen/Cholesky>
 
 #include "base/simd.h"
 

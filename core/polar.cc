@@ -1,9 +1,10 @@
 #include "core/polar.h"
 
-#include <Eigen/LU>
-#include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
+
+#include <Eigen/LU>
+#include <Eigen/SVD>
 
 #include "base/simd.h"
 
