@@ -21,9 +21,21 @@
 #pragma once
 
 #include <cstdlib>
+#include <string>
 #include <string_view>
 
 namespace motionlod {
+
+// What is wrong with the environment's MOTIONLOD_SIMD, or "" when it is unset, "auto" (the
+// widest version this CPU runs) or "baseline". Programs report it as a usage error before
+// any work: a misspelt "baseline" must not silently bake another version.
+inline std::string SimdSettingProblem() {
+  const char* value = std::getenv("MOTIONLOD_SIMD");
+  if (value == nullptr) return {};
+  const std::string_view setting(value);
+  if (setting.empty() || setting == "auto" || setting == "baseline") return {};
+  return "MOTIONLOD_SIMD is '" + std::string(setting) + "' ('auto' or 'baseline' expected)";
+}
 
 #if defined(__GNUC__) && defined(__x86_64__) && !(defined(__AVX2__) && defined(__FMA__))
 #define MOTIONLOD_SIMD_DISPATCH 1

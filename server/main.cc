@@ -127,6 +127,10 @@ int Main(int argc, char** argv) {
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
   ::signal(SIGPIPE, SIG_IGN);
 
+  if (const std::string problem = SimdSettingProblem(); !problem.empty()) {
+    std::fprintf(stderr, "motionlodd: %s\n", problem.c_str());
+    return 2;
+  }
   std::string text;
   auto options = ParseCommandLine(
       argc, argv, [](const char* name) { return std::getenv(name); }, &text);

@@ -20,6 +20,7 @@
 #include <nlohmann/json.hpp>
 
 #include "base/allocator.h"
+#include "base/simd.h"
 #include "core/solve_levels.h"
 #include "io/asset.h"
 #include "io/sha256.h"
@@ -275,6 +276,9 @@ int RunPlot(const std::string& report_path, const std::string& out) {
 }
 
 int Main(int argc, char** argv) {
+  if (const std::string problem = SimdSettingProblem(); !problem.empty()) {
+    return Fail(InvalidArgument(problem));
+  }
   CLI::App app{"motionlod: Motion LoD bake tool (Ahn, Oh, Wohn 2006)"};
   app.require_subcommand(1);
   app.set_version_flag("--version", "motionlod 0.1.0");

@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include <csignal>
 #include <fstream>
 #include <map>
 
@@ -136,6 +137,21 @@ TEST(Config, InvalidValuesAreRefusedWithTheOptionNamed) {
   EXPECT_FALSE(unknown.ok());
   auto missing = Parse({"--config", "/nonexistent/motionlodd.toml"}, Env({}));
   EXPECT_NE(missing.status().message().find("/nonexistent/motionlodd.toml"), std::string::npos);
+}
+
+// MOTIONLOD_SIMD picks the hot loops' machine version (base/simd.h): a misspelt value stops
+// the daemon before it listens, naming the variable; "baseline" starts it, and its start-up
+// line says which version runs.
+TEST(Config, AnUnknownSimdSettingStopsTheDaemonAndTheVersionIsLogged) {
+  {
+    testing::Daemon daemon(testing::TestDirectory());
+    EXPECT_FALSE(daemon.Start({}, {"MOTIONLOD_SIMD=sse2"}));
+    EXPECT_NE(daemon.Log().find("MOTIONLOD_SIMD is 'sse2'"), std::string::npos) << daemon.Log();
+  }
+  testing::Daemon daemon(testing::TestDirectory());
+  ASSERT_TRUE(daemon.Start({}, {"MOTIONLOD_SIMD=baseline"})) << daemon.error;
+  EXPECT_NE(daemon.Log().find("baseline hot loops"), std::string::npos) << daemon.Log();
+  EXPECT_EQ(daemon.Stop(SIGTERM), 0);
 }
 
 }  // namespace

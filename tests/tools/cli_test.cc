@@ -140,6 +140,15 @@ TEST_F(Cli, TheAvx2AndBaselineVersionsReportTheSameFigures) {
   }
 }
 
+TEST_F(Cli, AnUnknownSimdSettingIsAUsageError) {
+  const fs::path out = dir_ / "out";
+  const ProcessResult bake = Exec("bake " + Sample() + " --levels 23,9 --out " + out.string(),
+                                  "MOTIONLOD_SIMD=avx512");
+  EXPECT_EQ(bake.exit_code, 2) << bake.output;
+  EXPECT_NE(bake.output.find("MOTIONLOD_SIMD is 'avx512'"), std::string::npos) << bake.output;
+  EXPECT_FALSE(fs::exists(out));
+}
+
 TEST_F(Cli, RankPrintsTheRemovalOrderWithTheRootLast) {
   const ProcessResult run = Exec("rank " + Sample() + " --animation Running_A --json");
   ASSERT_EQ(run.exit_code, 0) << run.output;
