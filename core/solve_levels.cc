@@ -777,6 +777,15 @@ PreparedMotion::Impl::MaxSearchStart PreparedMotion::Impl::MaxVertexError(
         }
         const double* bound = bounds.group_bound.data() + static_cast<size_t>(t) * n;
         const Vec3d* norms = bounds.column_norms.data() + static_cast<size_t>(t) * n;
+        // The bound of a group's or a cluster's vertices (entry `index` of a CSR list of
+        // influences) from their box.
+        const auto box_bound = [&](const std::vector<Character::MaxInfluence>& influences,
+                                   const std::vector<uint32_t>& offsets, size_t index,
+                                   const Vec3d& center, const Vec3d& half) {
+          return WeightedBound(
+              influences.data() + offsets[index], influences.data() + offsets[index + 1],
+              [&](int g) { return BoxBound(frame_delta[g], norms[g], center, half); });
+        };
         // Only the groups that can beat the best so far, by decreasing bound.
         group_order.clear();
         for (int j : bounds.groups) {
@@ -786,21 +795,14 @@ PreparedMotion::Impl::MaxSearchStart PreparedMotion::Impl::MaxVertexError(
                   [&](int a, int b) { return bound[a] > bound[b]; });
         for (int j : group_order) {
           if (bound[j] <= std::max(best, floor)) break;
-          const Vec3d& group_center = c.group_centers()[j];
-          const Vec3d& group_half = c.group_half_extents()[j];
-          const double refined = WeightedBound(
-              group_influences.data() + group_influence_offsets[j],
-              group_influences.data() + group_influence_offsets[j + 1],
-              [&](int g) { return BoxBound(frame_delta[g], norms[g], group_center, group_half); });
+          const double refined = box_bound(group_influences, group_influence_offsets, j,
+                                           c.group_centers()[j], c.group_half_extents()[j]);
           if (refined <= std::max(best, floor)) continue;
           for (uint32_t cluster = group_clusters[j]; cluster < group_clusters[j + 1]; ++cluster) {
             if (cluster_mask != nullptr && !(*cluster_mask)[cluster]) continue;
-            const Vec3d& center = c.cluster_centers()[cluster];
-            const Vec3d& half = c.cluster_half_extents()[cluster];
-            const double cluster_bound = WeightedBound(
-                cluster_influences.data() + cluster_influence_offsets[cluster],
-                cluster_influences.data() + cluster_influence_offsets[cluster + 1],
-                [&](int g) { return BoxBound(frame_delta[g], norms[g], center, half); });
+            const double cluster_bound =
+                box_bound(cluster_influences, cluster_influence_offsets, cluster,
+                          c.cluster_centers()[cluster], c.cluster_half_extents()[cluster]);
             if (cluster_bound <= std::max(best, floor)) continue;
             for (uint32_t e = cluster_vertex_offsets[cluster];
                  e < cluster_vertex_offsets[cluster + 1]; ++e) {
