@@ -116,6 +116,66 @@ TEST(BuildCharacter, ClustersPartitionTheSkinAndBoundTheirVerticesAndWeights) {
   for (int i = 0; i < c.vertex_count(); ++i) EXPECT_EQ(seen[i], 1) << "vertex " << i;
 }
 
+// One joint weighting every vertex of `positions`, which need no triangles.
+RawCharacter OneJointCloud(std::vector<Vec3f> positions) {
+  RawCharacter raw;
+  raw.skeleton.parents = {-1};
+  raw.skeleton.joint_names = {"root"};
+  raw.skeleton.bind_world = {IdentityAffine()};
+  const size_t p = positions.size();
+  raw.skin.positions = std::move(positions);
+  raw.skin.normals.assign(p, Vec3f::UnitY());
+  for (size_t i = 0; i <= p; ++i) raw.skin.influence_offsets.push_back(static_cast<uint32_t>(i));
+  raw.skin.influence_joints.assign(p, 0);
+  raw.skin.influence_weights.assign(p, 1.0f);
+  return raw;
+}
+
+TEST(BuildCharacter, ClustersAreMedianSplitsEvenWhereCoordinatesRepeat) {
+  // Median splits leave every cluster of a group larger than one cluster between half
+  // and all of kMaxClusterVertices. Integer grids repeat each coordinate many times (the
+  // split's equal keys), a single repeated point makes every key equal, and a shuffled
+  // run along x shows whether the splits really are at the median.
+  std::vector<Vec3f> grid, run, one_point;
+  for (int x = 0; x < 48; ++x) {
+    for (int z = 0; z < 40; ++z)
+      grid.push_back(Vec3f(static_cast<float>(x % 7), 0.0f, static_cast<float>(z)));
+  }
+  for (int i = 0; i < 3000; ++i) {
+    run.push_back(
+        Vec3f(static_cast<float>(i * 1543 % 3000), 0.001f * static_cast<float>(i % 5), 0.0f));
+  }
+  one_point.assign(1000, Vec3f(1.0f, 2.0f, 3.0f));
+  for (std::vector<Vec3f>* positions : {&grid, &run, &one_point}) {
+    const size_t p = positions->size();
+    auto built = BuildCharacter(OneJointCloud(*positions));
+    ASSERT_TRUE(built.ok()) << built.status().ToString();
+    const Character& c = **built;
+    const auto& offsets = c.cluster_vertex_offsets();
+    std::vector<int> seen(p, 0);
+    for (size_t cluster = 0; cluster + 1 < offsets.size(); ++cluster) {
+      const uint32_t size = offsets[cluster + 1] - offsets[cluster];
+      EXPECT_GE(size, static_cast<uint32_t>(Character::kMaxClusterVertices / 2)) << "p " << p;
+      EXPECT_LE(size, static_cast<uint32_t>(Character::kMaxClusterVertices)) << "p " << p;
+      for (uint32_t e = offsets[cluster]; e < offsets[cluster + 1]; ++e) {
+        const uint32_t i = c.cluster_vertices()[e];
+        ++seen[i];
+        const Vec3d offset = c.skin().positions[i].cast<double>() - c.cluster_centers()[cluster];
+        EXPECT_TRUE(
+            (offset.cwiseAbs().array() <= c.cluster_half_extents()[cluster].array() + 1e-9).all());
+      }
+    }
+    EXPECT_EQ(std::count(seen.begin(), seen.end(), 1), static_cast<std::ptrdiff_t>(p));
+  }
+  // Median splits along x cut the run into clusters of consecutive x, whose boxes do not
+  // overlap: together they cover at most the run's length.
+  const auto built = BuildCharacter(OneJointCloud(run));
+  ASSERT_TRUE(built.ok());
+  double covered = 0;
+  for (const Vec3d& half : (*built)->cluster_half_extents()) covered += 2 * half.x();
+  EXPECT_LE(covered, 2999.0);
+}
+
 TEST(ValidateRawCharacter, RejectsEachInvalidField) {
   struct Case {
     const char* what;
