@@ -234,22 +234,30 @@ StatusOr<std::shared_ptr<const Character>> BuildCharacter(RawCharacter raw, cons
       std::vector<uint32_t> cursor(group_offsets.begin(), group_offsets.end() - 1);
       for (int i = 0; i < p; ++i) c->cluster_vertices_[cursor[dominant_joint[i]]++] = static_cast<uint32_t>(i);
     }
-    // The largest weight each joint gives the vertices [begin, end), appended as a list.
-    std::vector<float> max_weight(n, 0.0f);
+    // The range of the weights each joint gives the vertices [begin, end), appended as a
+    // list: min_weight stays 0 unless every vertex has a weight from the joint.
+    std::vector<float> min_weight(n, 0.0f), max_weight(n, 0.0f);
+    std::vector<uint32_t> weighted_count(n, 0);
     std::vector<int32_t> touched;
     auto append_influences = [&](const uint32_t* begin, const uint32_t* end,
-                                 std::vector<Character::MaxInfluence>& list,
+                                 std::vector<Character::InfluenceRange>& list,
                                  std::vector<uint32_t>& offsets) {
       for (const uint32_t* v = begin; v != end; ++v) {
         for (uint32_t e = k.influence_offsets[*v]; e < k.influence_offsets[*v + 1]; ++e) {
           const int32_t j = k.influence_joints[e];
-          if (max_weight[j] == 0) touched.push_back(j);
-          max_weight[j] = std::max(max_weight[j], k.influence_weights[e]);
+          const float w = k.influence_weights[e];
+          if (weighted_count[j]++ == 0) {
+            touched.push_back(j);
+            min_weight[j] = max_weight[j] = w;
+          }
+          min_weight[j] = std::min(min_weight[j], w);
+          max_weight[j] = std::max(max_weight[j], w);
         }
       }
+      const auto size = static_cast<uint32_t>(end - begin);
       for (int32_t j : touched) {
-        list.push_back({j, max_weight[j]});
-        max_weight[j] = 0;
+        list.push_back({j, weighted_count[j] == size ? min_weight[j] : 0.0f, max_weight[j]});
+        weighted_count[j] = 0;
       }
       touched.clear();
       offsets.push_back(static_cast<uint32_t>(list.size()));

@@ -88,17 +88,19 @@ class Character {
   const std::vector<uint32_t>& cluster_vertices() const { return cluster_vertices_; }
   const std::vector<Vec3d>& cluster_centers() const { return cluster_centers_; }
   const std::vector<Vec3d>& cluster_half_extents() const { return cluster_half_extents_; }
-  // The joints that weight any vertex of a group or cluster, each with the largest weight
-  // it gives one of them (CSR): a vertex moves by at most sum_g w_g |Delta_g [v;1]|, so
-  // these weights bound a whole cluster's error from per-joint bounds.
-  struct MaxInfluence {
+  // The joints that weight any vertex of a group or cluster, each with the range of the
+  // weights it gives them (CSR): the smallest (0 where some vertex has no weight from it)
+  // and the largest. A vertex moves by at most sum_g w_g |Delta_g [v;1]|, so these ranges
+  // (with the weights' sum of 1) bound a whole cluster's error from per-joint bounds.
+  struct InfluenceRange {
     int32_t joint = 0;
-    float weight = 0;
+    float min_weight = 0;
+    float max_weight = 0;
   };
   const std::vector<uint32_t>& group_influence_offsets() const { return group_influence_offsets_; }
-  const std::vector<MaxInfluence>& group_influences() const { return group_influences_; }
+  const std::vector<InfluenceRange>& group_influences() const { return group_influences_; }
   const std::vector<uint32_t>& cluster_influence_offsets() const { return cluster_influence_offsets_; }
-  const std::vector<MaxInfluence>& cluster_influences() const { return cluster_influences_; }
+  const std::vector<InfluenceRange>& cluster_influences() const { return cluster_influences_; }
   // Direct children of each joint.
   const std::vector<std::vector<int>>& children() const { return children_; }
   int FindJoint(const std::string& name) const;  // -1 when absent
@@ -136,9 +138,9 @@ class Character {
   std::vector<Vec3d> cluster_centers_;
   std::vector<Vec3d> cluster_half_extents_;
   std::vector<uint32_t> group_influence_offsets_;
-  std::vector<MaxInfluence> group_influences_;
+  std::vector<InfluenceRange> group_influences_;
   std::vector<uint32_t> cluster_influence_offsets_;
-  std::vector<MaxInfluence> cluster_influences_;
+  std::vector<InfluenceRange> cluster_influences_;
   std::vector<std::vector<int>> children_;
   std::vector<JointPairMoment> joint_pair_moments_;
 };

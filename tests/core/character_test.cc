@@ -87,9 +87,10 @@ TEST(BuildCharacter, ClustersPartitionTheSkinAndBoundTheirVerticesAndWeights) {
       const uint32_t size = vertex_offsets[cluster + 1] - vertex_offsets[cluster];
       EXPECT_GE(size, 1u);
       EXPECT_LE(size, static_cast<uint32_t>(Character::kMaxClusterVertices));
-      // Each joint weighting a vertex of the cluster is listed with at least that weight,
-      // and the largest weight is attained.
-      std::vector<float> largest(n, 0.0f);
+      // Each joint weighting a vertex of the cluster is listed with the range of its
+      // weights: the smallest is 0 where a vertex of the cluster has no weight from it.
+      std::vector<float> largest(n, 0.0f), smallest(n, 2.0f);
+      std::vector<uint32_t> weighted(n, 0);
       for (uint32_t e = vertex_offsets[cluster]; e < vertex_offsets[cluster + 1]; ++e) {
         const uint32_t i = c.cluster_vertices()[e];
         ++seen[i];
@@ -98,7 +99,10 @@ TEST(BuildCharacter, ClustersPartitionTheSkinAndBoundTheirVerticesAndWeights) {
         float dominant_weight = 0;
         int dominant = -1;
         for (uint32_t g = skin.influence_offsets[i]; g < skin.influence_offsets[i + 1]; ++g) {
-          largest[skin.influence_joints[g]] = std::max(largest[skin.influence_joints[g]], skin.influence_weights[g]);
+          const int j = skin.influence_joints[g];
+          largest[j] = std::max(largest[j], skin.influence_weights[g]);
+          smallest[j] = std::min(smallest[j], skin.influence_weights[g]);
+          ++weighted[j];
           if (skin.influence_weights[g] > dominant_weight) {
             dominant_weight = skin.influence_weights[g];
             dominant = skin.influence_joints[g];
@@ -106,11 +110,16 @@ TEST(BuildCharacter, ClustersPartitionTheSkinAndBoundTheirVerticesAndWeights) {
         }
         EXPECT_EQ(dominant, group) << "vertex " << i;
       }
-      std::vector<float> listed(n, 0.0f);
+      std::vector<float> listed_max(n, 0.0f), listed_min(n, 0.0f), expected_min(n, 0.0f);
       for (uint32_t q = c.cluster_influence_offsets()[cluster]; q < c.cluster_influence_offsets()[cluster + 1]; ++q) {
-        listed[c.cluster_influences()[q].joint] = c.cluster_influences()[q].weight;
+        listed_max[c.cluster_influences()[q].joint] = c.cluster_influences()[q].max_weight;
+        listed_min[c.cluster_influences()[q].joint] = c.cluster_influences()[q].min_weight;
       }
-      EXPECT_EQ(listed, largest) << "cluster " << cluster;
+      for (int j = 0; j < n; ++j) {
+        if (weighted[j] == size) expected_min[j] = smallest[j];
+      }
+      EXPECT_EQ(listed_max, largest) << "cluster " << cluster;
+      EXPECT_EQ(listed_min, expected_min) << "cluster " << cluster;
     }
   }
   for (int i = 0; i < c.vertex_count(); ++i) EXPECT_EQ(seen[i], 1) << "vertex " << i;
