@@ -1,12 +1,20 @@
 // One bake, or one skinning pass, of a file on one thread, for instruction counts under
-// callgrind (docs/PERFORMANCE.md, "Where the time goes"): the instructions of the bake
-// are those of main's callees less LoadAssetFile, comparable across commits whatever the
-// machine's load.
+// callgrind (docs/PERFORMANCE.md, "Where the time goes"): run with --instr-atstart=no,
+// callgrind counts only the span between the client requests around Bake or the pass
+// (not the import, nor the inputs of the pass), comparable across commits whatever the
+// machine's load. Without valgrind's header the requests are no-ops.
 //   motionlod_bench_bake_once FILE VARIANT [skin|all]
 // "skin" runs the skinning pass instead; "all" bakes every level (all_levels) instead of
 // the default ladder.
 #include <cstdio>
 #include <cstring>
+
+#if __has_include(<valgrind/callgrind.h>)
+#include <valgrind/callgrind.h>
+#else
+#define CALLGRIND_START_INSTRUMENTATION
+#define CALLGRIND_STOP_INSTRUMENTATION
+#endif
 
 #include "base/allocator.h"
 #include "io/asset.h"
@@ -37,7 +45,13 @@ int main(int argc, char** argv) {
   if (skin) {
     auto inputs = pipeline::PrepareInputs(request);
     if (!inputs.ok()) return 1;
-    return pipeline::SkinningPassSeconds(*inputs->character, inputs->motion, 1) < 0;
+    CALLGRIND_START_INSTRUMENTATION;
+    const double seconds = pipeline::SkinningPassSeconds(*inputs->character, inputs->motion, 1);
+    CALLGRIND_STOP_INSTRUMENTATION;
+    return seconds < 0;
   }
-  return pipeline::Bake(request).ok() ? 0 : 1;
+  CALLGRIND_START_INSTRUMENTATION;
+  const bool baked = pipeline::Bake(request).ok();
+  CALLGRIND_STOP_INSTRUMENTATION;
+  return baked ? 0 : 1;
 }

@@ -760,10 +760,9 @@ PreparedMotion::Impl::MaxSearchStart PreparedMotion::Impl::MaxVertexError(
     // and frames without evaluating most of them. For a box with center c and half extents
     // h in the bind pose, every vertex v in it has
     //   |Delta_g [v;1]| <= U_g(t) = |Delta_g [c;1]| + sum_a |Delta_g(3x3) e_a| h_a,
-    // so a set of vertices whose joints g give them weights of at most W_g has
-    //   |d_i| <= min(max_g U_g, sum_g W_g U_g)
-    // (the first because i's weights sum to 1, the second by the triangle inequality; the
-    // second stays tight for vertices lightly weighted to a joint that moved a lot).
+    // so a set of vertices whose joints g give them weights in [a_g, b_g] has, by the
+    // triangle inequality, |d_i| <= max sum_g w_g U_g over weights in those ranges that
+    // sum to 1 (WeightedBound: at most min(max_g U_g, sum_g b_g U_g), often much less).
     // Bounds nest: per frame and vertex group (dominant joint) from the joints' boxes
     // (FrameBounds), then from the group's box, then per cluster; frames and groups are
     // visited by decreasing bound and only clusters whose bound beats the best exact value
