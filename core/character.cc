@@ -23,8 +23,8 @@ struct ClusterPoint {
   uint32_t vertex;
 };
 
-// Moves [begin, end) so that [begin, begin + count) holds points with `axis` coordinates
-// below `pivot` and the rest follow; returns begin + count. Branch-free (Lomuto's scheme
+// Moves [begin, end) so that the points whose `axis` coordinate is below `pivot` (at most
+// `pivot`, with or_equal) come first; returns where the rest begin. Branch-free (Lomuto's scheme
 // with an unconditional swap): mesh coordinates make a compare's outcome a coin flip, and
 // std::nth_element's branching partition spent most of its time on mispredictions.
 ClusterPoint* PartitionBelow(ClusterPoint* begin, ClusterPoint* end, int axis, float pivot,
