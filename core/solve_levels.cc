@@ -20,6 +20,38 @@ using Eigen::MatrixXd;
 // straddles packets, and the compiler spills it to extract its columns).
 using PaddedDelta = Eigen::Matrix4f;
 
+namespace {
+
+// Adds tr(A^T Cp B) and tr(A^T Cn B), lane by lane, to p[4] and n[4] (each sums to its
+// trace): A and B are 4x3 blocks of column-major matrices with `stride` rows (4 contiguous
+// rows per column), Cp and Cn 4x4 (Cn a 3x3 padded with zeros, which leaves the translation
+// rows out). Plain loops over the 4 rows, so that the AVX2 version (base/simd.h) runs each
+// column as one 256-bit vector and defers the horizontal sum to the caller: Eigen's
+// fixed-size products keep 128-bit packets there and reduce every product on its own.
+inline void AddTraceForms(const double* a, const double* b, Eigen::Index stride,
+                          const Eigen::Matrix4d& cp, const Eigen::Matrix4d& cn,
+                          double* __restrict p, double* __restrict n) {
+  for (int col = 0; col < 3; ++col) {
+    double product_p[4] = {}, product_n[4] = {};
+    for (int r = 0; r < 4; ++r) {
+      const double x = b[col * stride + r];
+      for (int i = 0; i < 4; ++i) {
+        product_p[i] += cp(i, r) * x;
+        product_n[i] += cn(i, r) * x;
+      }
+    }
+    for (int i = 0; i < 4; ++i) {
+      p[i] += a[col * stride + i] * product_p[i];
+      n[i] += a[col * stride + i] * product_n[i];
+    }
+  }
+}
+
+// The sum of AddTraceForms' four lanes.
+inline double LaneSum(const double* lanes) { return (lanes[0] + lanes[1]) + (lanes[2] + lanes[3]); }
+
+}  // namespace
+
 const char* VariantName(Variant variant) {
   switch (variant) {
     case Variant::kVP: return "vp";
@@ -73,7 +105,7 @@ struct PreparedMotion::Impl {
   // equations, as they are.
   std::vector<std::pair<int, int>> pairs;
   std::vector<Eigen::Matrix4d> pair_cp;
-  std::vector<Eigen::Matrix3d> pair_cn;
+  std::vector<Eigen::Matrix4d> pair_cn;  // 3x3, padded with a zero row and column (TraceForms)
   std::vector<Eigen::Matrix4d> pair_fit;
   // For the quadratic forms in the kept joints' space (see KeptForms; Workload::kEveryLevel
   // only, empty otherwise): with every frame's matrices shifted by the root's translation
@@ -85,9 +117,10 @@ struct PreparedMotion::Impl {
   // The right-hand sides are assembled transposed (3T x 4m, see SolveSystem)
   // from transposed copies: ft = (Q kt)^T and ktt = kt^T, both 3T x 4n.
   MatrixXd ft, ktt;
-  std::vector<Eigen::Vector4d> joint_point;      // [p0_j; 1]
-  std::vector<Eigen::Vector4d> joint_axis;       // [o0_j; 0], the bind y axis
-  std::vector<double> joint_weight;              // omega * b_j
+  // The joint terms' forms, Ep_joint(t) = sum_j tr(Delta_j^T Jp_j Delta_j) and the same
+  // for En with Jn_j: Jp_j = omega b_j [p0_j;1][p0_j;1]^T, Jn_j = omega b_j [o0_j;0][o0_j;0]^T
+  // (o0_j the bind y axis).
+  std::vector<Eigen::Matrix4d> joint_cp, joint_cn;
   std::vector<Eigen::Matrix4d> joint_fit;        // J_j with alpha and beta_fit
   double alpha = 1, beta = 1, beta_fit = 1;
   // Sampled figures. The sampled vertices' skin is copied out contiguously: read in place,
@@ -167,12 +200,18 @@ struct PreparedMotion::Impl {
   std::vector<size_t> ActivePairs(const DeltaView& delta) const;
   // Joint pair q's terms of the vertex parts of Ep and En in a frame (4n x 3, Delta_k^T
   // stacked): tr(Delta_k^T Cp_kl Delta_l) and tr(Delta_k^T Cn_kl Delta_l), doubled for k != l.
-  std::pair<double, double> PairTerms(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame, size_t q) const {
+  // AddPairTerms adds them lane by lane to p[4] and n[4] (AddTraceForms).
+  void AddPairTerms(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame, size_t q, double* p,
+                    double* n) const {
     const auto [k, l] = pairs[q];
-    const Eigen::Matrix<double, 4, 3> dk = frame.block<4, 3>(4 * k, 0);
-    const Eigen::Matrix<double, 4, 3> dl = frame.block<4, 3>(4 * l, 0);
-    return {dk.cwiseProduct(pair_cp[q] * dl).sum(),
-            dk.topRows<3>().cwiseProduct(pair_cn[q] * dl.topRows<3>()).sum()};
+    AddTraceForms(frame.data() + 4 * k, frame.data() + 4 * l, frame.rows(), pair_cp[q], pair_cn[q],
+                  p, n);
+  }
+  std::pair<double, double> PairTerms(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame,
+                                      size_t q) const {
+    double p[4] = {}, n[4] = {};
+    AddPairTerms(frame, q, p, n);
+    return {LaneSum(p), LaneSum(n)};
   }
   // A level's quadratic forms in its kept joints' space. With Delta_k = X_s - K_k, s = phi(k),
   //   sum_kl tr(Delta_k^T C_kl Delta_l) = sum_su tr(X_s^T G_su X_u) - 2 sum_k tr(X_s^T F_k)
@@ -185,7 +224,7 @@ struct PreparedMotion::Impl {
   struct KeptForms {
     std::vector<std::pair<int, int>> slot_pairs;  // s <= u
     std::vector<Eigen::Matrix4d> slot_cp;         // pair factors folded in, as pair_cp
-    std::vector<Eigen::Matrix3d> slot_cn;
+    std::vector<Eigen::Matrix4d> slot_cn;         // padded, as pair_cn
     const MatrixXd* solution = nullptr;           // X, 3T columns
     std::vector<int> slot_row;                    // X_s^T is the 4 rows from slot_row[s]
     std::vector<int> slot_of;                     // phi(k)
@@ -325,19 +364,24 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
     const double factor = moment.k == moment.l ? 1.0 : 2.0;
     d.pairs.emplace_back(moment.k, moment.l);
     d.pair_cp.push_back(factor * moment.position_moment);
-    d.pair_cn.push_back(factor * moment.normal_moment);
+    Eigen::Matrix4d cn = Eigen::Matrix4d::Zero();
+    cn.topLeftCorner<3, 3>() = factor * moment.normal_moment;
+    d.pair_cn.push_back(cn);
   }
 
   const std::vector<double>& lengths = c.subtree_lengths();
   const double total_length = std::accumulate(lengths.begin(), lengths.end(), 0.0);
-  d.joint_point.resize(n);
-  d.joint_axis.resize(n);
-  d.joint_weight.resize(n);
+  d.joint_cp.resize(n);
+  d.joint_cn.resize(n);
   for (int j = 0; j < n; ++j) {
     const Affine34d& bind = c.skeleton().bind_world[j];
-    d.joint_point[j] << bind.col(3), 1.0;
-    d.joint_axis[j] << bind.col(1).normalized(), 0.0;
-    d.joint_weight[j] = total_length > 0 ? settings.joint_weight * lengths[j] / total_length : 0.0;
+    Eigen::Vector4d point, axis;
+    point << bind.col(3), 1.0;
+    axis << bind.col(1).normalized(), 0.0;
+    const double weight =
+        total_length > 0 ? settings.joint_weight * lengths[j] / total_length : 0.0;
+    d.joint_cp[j] = weight * point * point.transpose();
+    d.joint_cn[j] = weight * axis * axis.transpose();
   }
 
   // Normalisation: the largest error of the root-only, unoptimised skeleton.
@@ -376,7 +420,7 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
         // The moments themselves: pair_cp and pair_cn have off-diagonal pairs doubled.
         const double single = k == l ? 1.0 : 0.5;
         const Eigen::Matrix4d cp = single * d.pair_cp[q];
-        const Eigen::Matrix3d cn = single * d.pair_cn[q];
+        const Eigen::Matrix3d cn = single * d.pair_cn[q].topLeftCorner<3, 3>();
         fp.block<4, 3>(4 * k, 0).noalias() += cp * shifted.block<4, 3>(4 * l, 0);
         fn.block<3, 3>(4 * k, 0).noalias() += cn * shifted.block<3, 3>(4 * l, 0);
         if (k != l) {
@@ -412,9 +456,7 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
   }
   d.joint_fit.resize(n);
   for (int j = 0; j < n; ++j) {
-    d.joint_fit[j] = d.joint_weight[j] *
-                     (d.alpha * d.joint_point[j] * d.joint_point[j].transpose() +
-                      d.beta_fit * d.joint_axis[j] * d.joint_axis[j].transpose());
+    d.joint_fit[j] = d.alpha * d.joint_cp[j] + d.beta_fit * d.joint_cn[j];
   }
 
   // The sample for the per-vertex figures, with the original blended normals.
@@ -572,7 +614,7 @@ std::optional<PreparedMotion::Impl::KeptForms> PreparedMotion::Impl::MakeKeptFor
       slot_pair = static_cast<int>(forms.slot_pairs.size());
       forms.slot_pairs.emplace_back(s, u);
       forms.slot_cp.push_back(Eigen::Matrix4d::Zero());
-      forms.slot_cn.push_back(Eigen::Matrix3d::Zero());
+      forms.slot_cn.push_back(Eigen::Matrix4d::Zero());
     }
     // A pair of distinct joints in one slot counts twice in the double sum, as pair_cp has
     // it; so does a pair across two slots (tr(X_s^T C X_u) = tr(X_u^T C X_s), C symmetric).
@@ -591,14 +633,12 @@ void PreparedMotion::Impl::FrameQuadraticErrors(const Eigen::Matrix<double, Eige
                                                 Eigen::Matrix<double, Eigen::Dynamic, 3>& x,
                                                 const std::vector<int>& kept, int t,
                                                 LevelErrors& out) const {
-  // sum_kl tr(Delta_k^T C_kl Delta_l) over the joint pairs.
+  // sum_kl tr(Delta_k^T C_kl Delta_l) over the joint pairs, lane by lane (AddTraceForms).
   const auto joint_pairs = [&](double& ep, double& en) {
-    ep = en = 0;
-    for (size_t q : active_pairs) {
-      const auto [term_p, term_n] = PairTerms(frame, q);
-      ep += term_p;
-      en += term_n;
-    }
+    double p[4] = {}, n[4] = {};
+    for (size_t q : active_pairs) AddPairTerms(frame, q, p, n);
+    ep = LaneSum(p);
+    en = LaneSum(n);
   };
   double ep = 0, en = 0;
   if (kept_forms == nullptr) {
@@ -611,33 +651,44 @@ void PreparedMotion::Impl::FrameQuadraticErrors(const Eigen::Matrix<double, Eige
       x.block<4, 3>(4 * s, 0) = kept_forms->solution->block<4, 3>(kept_forms->slot_row[s], 3 * t);
       x.row(4 * s + 3) -= root;
     }
-    double quadratic_p = 0, quadratic_n = 0;
+    // Summed lane by lane (AddTraceForms): the quadratic terms, then minus twice the linear ones.
+    double sum_p[4] = {}, sum_n[4] = {};
     for (size_t q = 0; q < kept_forms->slot_pairs.size(); ++q) {
       const auto [s, u] = kept_forms->slot_pairs[q];
-      const Eigen::Matrix<double, 4, 3> xs = x.block<4, 3>(4 * s, 0);
-      const Eigen::Matrix<double, 4, 3> xu = x.block<4, 3>(4 * u, 0);
-      quadratic_p += xs.cwiseProduct(kept_forms->slot_cp[q] * xu).sum();
-      quadratic_n += xs.topRows<3>().cwiseProduct(kept_forms->slot_cn[q] * xu.topRows<3>()).sum();
+      AddTraceForms(x.data() + 4 * s, x.data() + 4 * u, x.rows(), kept_forms->slot_cp[q],
+                    kept_forms->slot_cn[q], sum_p, sum_n);
     }
-    double linear_p = 0, linear_n = 0;
+    double linear_p[4] = {}, linear_n[4] = {};
+    const double* fp = fp_root.data() + 3 * t * fp_root.rows();
+    const double* fn = fn_root.data() + 3 * t * fn_root.rows();
     for (int k = 0; k < n; ++k) {
-      const Eigen::Matrix<double, 4, 3> xs = x.block<4, 3>(4 * kept_forms->slot_of[k], 0);
-      linear_p += xs.cwiseProduct(fp_root.block<4, 3>(4 * k, 3 * t)).sum();
-      linear_n += xs.topRows<3>().cwiseProduct(fn_root.block<3, 3>(4 * k, 3 * t)).sum();
+      const double* xs = x.data() + 4 * kept_forms->slot_of[k];
+      for (int col = 0; col < 3; ++col) {
+        for (int i = 0; i < 4; ++i) {
+          linear_p[i] += xs[col * x.rows() + i] * fp[col * fp_root.rows() + 4 * k + i];
+          linear_n[i] += xs[col * x.rows() + i] * fn[col * fn_root.rows() + 4 * k + i];
+        }
+      }
     }
-    ep = quadratic_p - 2 * linear_p + const_p[t];
-    en = quadratic_n - 2 * linear_n + const_n[t];
+    for (int i = 0; i < 4; ++i) {
+      sum_p[i] -= 2 * linear_p[i];
+      sum_n[i] -= 2 * linear_n[i];
+    }
+    ep = LaneSum(sum_p) + const_p[t];
+    en = LaneSum(sum_n) + const_n[t];
     if (ep < kKeptFormsPrecision * const_p[t] || en < kKeptFormsPrecision * const_n[t]) {
       joint_pairs(ep, en);
     }
   }
   out.ep_vertex[t] = std::max(0.0, ep);
   out.en_vertex[t] = std::max(0.0, en);
+  double joint_p[4] = {}, joint_n[4] = {};
   for (int j : kept) {
-    const Eigen::Matrix<double, 4, 3> block = frame.block<4, 3>(4 * j, 0);
-    out.ep_joint[t] += joint_weight[j] * (block.transpose() * joint_point[j]).squaredNorm();
-    out.en_joint[t] += joint_weight[j] * (block.transpose() * joint_axis[j]).squaredNorm();
+    const double* block = frame.data() + 4 * j;
+    AddTraceForms(block, block, frame.rows(), joint_cp[j], joint_cn[j], joint_p, joint_n);
   }
+  out.ep_joint[t] = LaneSum(joint_p);
+  out.en_joint[t] = LaneSum(joint_n);
   out.e[t] = alpha * (out.ep_vertex[t] + out.ep_joint[t]) + beta * (out.en_vertex[t] + out.en_joint[t]);
 }
 
@@ -1306,14 +1357,15 @@ StatusOr<LevelErrors> BaselineSequence::Next(const ReducedSkeleton& level) {
       double* pair_p = st.pair_p.data() + static_cast<size_t>(t) * pair_count;
       double* pair_n = st.pair_n.data() + static_cast<size_t>(t) * pair_count;
       for (size_t q : changed_pairs) std::tie(pair_p[q], pair_n[q]) = d.PairTerms(frame, q);
-      // Summed as EvaluateErrors sums them over joint pairs.
-      double ep = 0, en = 0;
-      for (size_t q : active_pairs) {
-        ep += pair_p[q];
-        en += pair_n[q];
+      // Summed in four lanes, as EvaluateErrors sums the joint pairs' terms (the same to
+      // rounding): one chain of dependent additions would wait on its own latency.
+      double ep[4] = {}, en[4] = {};
+      for (size_t e = 0; e < active_pairs.size(); ++e) {
+        ep[e % 4] += pair_p[active_pairs[e]];
+        en[e % 4] += pair_n[active_pairs[e]];
       }
-      out.ep_vertex[t] = std::max(0.0, ep);
-      out.en_vertex[t] = std::max(0.0, en);
+      out.ep_vertex[t] = std::max(0.0, LaneSum(ep));
+      out.en_vertex[t] = std::max(0.0, LaneSum(en));
       out.e[t] = d.alpha * (out.ep_vertex[t] + out.ep_joint[t]) +
                  d.beta * (out.en_vertex[t] + out.en_joint[t]);
       d.FrameBounds(frame, t, bounds);
