@@ -694,12 +694,35 @@ void PreparedMotion::Impl::FrameQuadraticErrors(const Eigen::Matrix<double, Eige
 
 namespace {
 
-// Bounds of the maximum search (see MaxVertexError). U_g for a box with center c and half
-// extents h, from the column norms of Delta_g's 3x3 part.
-inline double BoxBound(const Affine34d& dk, const Vec3d& column_norms, const Vec3d& center,
-                       const Vec3d& half) {
-  return TransformPoint(dk, center).norm() + column_norms.dot(half);
-}
+// Delta_g in kLanes frames, lane by lane (the maximum search bounds a batch of frames at
+// once): entry 3a + i of m is Delta_g(i, a) (a = 3: the translation), then the column
+// norms of its 3x3 part.
+template <int kLanes>
+struct LaneDelta {
+  double m[12][kLanes];
+  double column_norms[3][kLanes];
+
+  void Set(int f, const Affine34d& delta, const Vec3d& norms) {
+    for (int a = 0; a < 4; ++a) {
+      for (int i = 0; i < 3; ++i) m[3 * a + i][f] = delta(i, a);
+    }
+    for (int a = 0; a < 3; ++a) column_norms[a][f] = norms[a];
+  }
+  // The bounds of the maximum search (see MaxVertexError) for a box with center c and half
+  // extents h: U_g = |Delta_g [c;1]| + sum_a |Delta_g(3x3) e_a| h_a in each lane, every loop
+  // over the lanes one whole vector.
+  void BoxBounds(const Vec3d& center, const Vec3d& half, double* __restrict u) const {
+    for (int f = 0; f < kLanes; ++f) {
+      double moved[3];
+      for (int i = 0; i < 3; ++i)
+        moved[i] =
+            m[i][f] * center[0] + m[3 + i][f] * center[1] + m[6 + i][f] * center[2] + m[9 + i][f];
+      u[f] = std::sqrt(moved[0] * moved[0] + moved[1] * moved[1] + moved[2] * moved[2]) +
+             column_norms[0][f] * half[0] + column_norms[1][f] * half[1] +
+             column_norms[2][f] * half[2];
+    }
+  }
+};
 
 // The largest sum_g w_g U_g, U_g = bound_of(g) >= 0, over weights w_g in their ranges
 // [a_g, b_g] that sum to at most 1: a linear programme whose value, for every lambda >= 0,
@@ -711,43 +734,52 @@ inline double BoxBound(const Affine34d& dk, const Vec3d& column_norms, const Vec
 // clusters of stormtrooper's every-level bakes (docs/PERFORMANCE.md, round 9), where
 // the largest weights of a cluster in a blend region sum to well over 1.
 // The breakpoints past lambda = 0 and max_g U_g cost a pass over the joints each: with
-// kRefine they are tried where those two are above `threshold` (nothing to gain below
-// it); without, the two alone (the per-frame group bounds, computed for every group).
-template <bool kRefine, typename BoundOf>
-double WeightedBound(const Character::InfluenceRange* begin, const Character::InfluenceRange* end,
-                     double threshold, BoundOf&& bound_of) {
+// kRefine they are tried where one of those two is above `threshold` (nothing to gain
+// below it); without, the two alone (the per-frame group bounds, computed for every group).
+// For kLanes frames at once (the maximum search's batches): bound_of(g, u) writes U_g of
+// each into u[kLanes], and out[kLanes] gets each frame's bound, every loop over the lanes
+// one whole vector.
+template <int kLanes, bool kRefine, typename BoundOf>
+void WeightedBound(const Character::InfluenceRange* begin, const Character::InfluenceRange* end,
+                   double threshold, BoundOf&& bound_of, double* __restrict out) {
   // Weights sum to 1 within the validation's tolerance.
   constexpr double kWeightSum = 1.0 + 1e-3;
   constexpr int kMaxJoints = 8;
   const auto count = static_cast<int>(std::min<std::ptrdiff_t>(end - begin, kMaxJoints));
-  // Unused entries stay 0: a breakpoint at 0 (valid), no share in the others.
-  double u[kMaxJoints] = {}, span[kMaxJoints] = {};
-  double floor = 0, budget = kWeightSum, largest = 0, widest = 0;
+  double u[kMaxJoints][kLanes], span[kMaxJoints];  // the first `count` entries
+  double floor[kLanes] = {}, largest[kLanes] = {}, widest[kLanes] = {}, bound[kLanes];
+  double budget = kWeightSum;
   for (const Character::InfluenceRange* q = begin; q != end; ++q) {
-    const double bound = bound_of(q->joint);
-    floor += q->min_weight * bound;
+    bound_of(q->joint, bound);
+    for (int f = 0; f < kLanes; ++f) {
+      floor[f] += q->min_weight * bound[f];
+      largest[f] = std::max(largest[f], bound[f]);
+      widest[f] += q->max_weight * bound[f];
+    }
     budget -= q->min_weight;
-    largest = std::max(largest, bound);
-    widest += q->max_weight * bound;
     if (const auto index = q - begin; kRefine && index < kMaxJoints) {
-      u[index] = bound;
+      for (int f = 0; f < kLanes; ++f) u[index][f] = bound[f];
       span[index] = q->max_weight - q->min_weight;
     }
   }
   budget = std::max(budget, 0.0);
   // lambda = 0 and lambda = max_g U_g hold for any number of joints; the other breakpoints
   // are tried for lists of up to kMaxJoints (a cluster's few joints).
-  double best = std::min(widest, floor + largest * budget);
-  if (!kRefine || best <= threshold || end - begin > kMaxJoints) return best;
-  // f at every breakpoint at once: the loop over them is the inner one, of fixed length, so
-  // that it runs as whole vectors and not as one chain of dependent additions.
-  double value[kMaxJoints];
-  for (int b = 0; b < kMaxJoints; ++b) value[b] = floor + u[b] * budget;
-  for (int g = 0; g < count; ++g) {
-    for (int b = 0; b < kMaxJoints; ++b) value[b] += span[g] * std::max(0.0, u[g] - u[b]);
+  bool above = false;
+  for (int f = 0; f < kLanes; ++f) {
+    out[f] = std::min(widest[f], floor[f] + largest[f] * budget);
+    above = above || out[f] > threshold;
   }
-  for (int b = 0; b < kMaxJoints; ++b) best = std::min(best, value[b]);
-  return best;
+  if (!kRefine || !above || end - begin > kMaxJoints) return;
+  // f at the breakpoints lambda = U_b (lambda = 0 is `widest`), each over the lanes at once.
+  for (int b = 0; b < count; ++b) {
+    double value[kLanes];
+    for (int f = 0; f < kLanes; ++f) value[f] = floor[f] + u[b][f] * budget;
+    for (int g = 0; g < count; ++g) {
+      for (int f = 0; f < kLanes; ++f) value[f] += span[g] * std::max(0.0, u[g][f] - u[b][f]);
+    }
+    for (int f = 0; f < kLanes; ++f) out[f] = std::min(out[f], value[f]);
+  }
 }
 
 }  // namespace
@@ -786,17 +818,21 @@ void PreparedMotion::Impl::FrameBounds(const Eigen::Matrix<double, Eigen::Dynami
     const auto& group_influence_offsets = c.group_influence_offsets();
     const auto& group_influences = c.group_influences();
     Vec3d* norms = bounds.column_norms.data() + static_cast<size_t>(t) * n;
+    LaneDelta<1> joint_delta;
     for (int k : bounds.joints) {
       const Affine34d dk = frame.block<4, 3>(4 * k, 0).transpose();
       norms[k] = dk.leftCols<3>().colwise().norm().transpose();
-      bounds.joint_bound[k] =
-          BoxBound(dk, norms[k], c.joint_vertex_centers()[k], c.joint_vertex_half_extents()[k]);
+      joint_delta.Set(0, dk, norms[k]);
+      joint_delta.BoxBounds(c.joint_vertex_centers()[k], c.joint_vertex_half_extents()[k],
+                            &bounds.joint_bound[k]);
     }
     for (int j : bounds.groups) {
-      const double u = WeightedBound<false>(
+      double u;
+      WeightedBound<1, false>(
           group_influences.data() + group_influence_offsets[j],
           group_influences.data() + group_influence_offsets[j + 1],
-          std::numeric_limits<double>::infinity(), [&](int g) { return bounds.joint_bound[g]; });
+          std::numeric_limits<double>::infinity(),
+          [&](int g, double* joint_bound) { *joint_bound = bounds.joint_bound[g]; }, &u);
       bounds.group_bound[static_cast<size_t>(t) * n + j] = u;
       bounds.frame_bound[t] = std::max(bounds.frame_bound[t], u);
     }
@@ -846,68 +882,101 @@ PreparedMotion::Impl::MaxSearchStart PreparedMotion::Impl::MaxVertexError(
     // Nothing at or below `floor` is refined: negligible, or within the decision's bound.
     const double floor =
         std::max(kNegligible * c.height(), std::isfinite(decide_within) ? decide_within : 0.0);
+    // Frames are searched in batches of kLanes, taken in that order: every bound is computed
+    // for the whole batch at once, one frame per lane of a vector (the frames of a batch
+    // have similar bounds, and most of them need the same groups and clusters bounded).
+    constexpr int kLanes = 4;
+    std::vector<LaneDelta<kLanes>> lane_delta(n);
     // The exact evaluations blend in float (the skin's own precision): twice the throughput,
-    // and the figure is a display quantity.
-    std::vector<Affine34d> frame_delta(n);
-    std::vector<PaddedDelta> frame_delta_f(n, PaddedDelta::Zero());
-    std::vector<int> group_order;
+    // and the figure is a display quantity. Entry kLanes k + f: Delta_k of lane f's frame.
+    std::vector<PaddedDelta> frame_delta_f(static_cast<size_t>(n) * kLanes, PaddedDelta::Zero());
+    std::vector<std::pair<double, int>> group_order;  // (largest lane bound, group)
     group_order.reserve(n);
+    // The bounds of a group's or a cluster's vertices (entry `index` of a CSR list of
+    // influences) from their box, per lane.
+    const auto weighted_box_bounds = [&](const std::vector<Character::InfluenceRange>& influences,
+                                         const std::vector<uint32_t>& offsets, size_t index,
+                                         const Vec3d& center, const Vec3d& half, double* bound) {
+      WeightedBound<kLanes, true>(
+          influences.data() + offsets[index], influences.data() + offsets[index + 1],
+          std::max(best, floor),
+          [&](int g, double* u) { lane_delta[g].BoxBounds(center, half, u); }, bound);
+    };
     // A lambda, so that a decided search returns from every loop at once.
     const auto search = [&] {
-      for (int t : frame_order) {
-        if (bounds.frame_bound[t] <= std::max(best, floor)) break;
-        for (int k : bounds.joints) {
-          frame_delta[k] = delta.At(k, t);
-          frame_delta_f[k].topRows<3>() = frame_delta[k].cast<float>();
+      for (size_t first = 0; first < frame_order.size(); first += kLanes) {
+        if (bounds.frame_bound[frame_order[first]] <= std::max(best, floor)) break;
+        // A batch past the last frame repeats its first frame in the lanes it lacks, unused.
+        int lane_frame[kLanes];
+        bool lane_used[kLanes];
+        for (int f = 0; f < kLanes; ++f) {
+          lane_used[f] = first + f < frame_order.size();
+          lane_frame[f] = frame_order[lane_used[f] ? first + f : first];
         }
-        const double* bound = bounds.group_bound.data() + static_cast<size_t>(t) * n;
-        const Vec3d* norms = bounds.column_norms.data() + static_cast<size_t>(t) * n;
-        // The bound of a group's or a cluster's vertices (entry `index` of a CSR list of
-        // influences) from their box.
-        const auto box_bound = [&](const std::vector<Character::InfluenceRange>& influences,
-                                   const std::vector<uint32_t>& offsets, size_t index,
-                                   const Vec3d& center, const Vec3d& half) {
-          return WeightedBound<true>(
-              influences.data() + offsets[index], influences.data() + offsets[index + 1],
-              std::max(best, floor),
-              [&](int g) { return BoxBound(frame_delta[g], norms[g], center, half); });
+        for (int k : bounds.joints) {
+          for (int f = 0; f < kLanes; ++f) {
+            const Affine34d dk = delta.At(k, lane_frame[f]);
+            lane_delta[k].Set(f, dk,
+                              bounds.column_norms[static_cast<size_t>(lane_frame[f]) * n + k]);
+            frame_delta_f[static_cast<size_t>(k) * kLanes + f].topRows<3>() = dk.cast<float>();
+          }
+        }
+        const auto group_bound = [&](int f, int j) {
+          return lane_used[f] ? bounds.group_bound[static_cast<size_t>(lane_frame[f]) * n + j]
+                              : 0.0;
         };
-        // Only the groups that can beat the best so far, by decreasing bound.
+        // Only the groups that can beat the best so far in some lane, by decreasing bound.
         group_order.clear();
         for (int j : bounds.groups) {
-          if (bound[j] > std::max(best, floor)) group_order.push_back(j);
+          double largest = 0;
+          for (int f = 0; f < kLanes; ++f) largest = std::max(largest, group_bound(f, j));
+          if (largest > std::max(best, floor)) group_order.emplace_back(largest, j);
         }
         std::sort(group_order.begin(), group_order.end(),
-                  [&](int a, int b) { return bound[a] > bound[b]; });
-        for (int j : group_order) {
-          if (bound[j] <= std::max(best, floor)) break;
-          const double refined = box_bound(group_influences, group_influence_offsets, j,
-                                           c.group_centers()[j], c.group_half_extents()[j]);
-          if (refined <= std::max(best, floor)) continue;
+                  [](const auto& a, const auto& b) { return a.first > b.first; });
+        for (const auto& [largest, j] : group_order) {
+          if (largest <= std::max(best, floor)) break;
+          bool open[kLanes];  // the lanes whose bound beats the best so far
+          double refined[kLanes];
+          weighted_box_bounds(group_influences, group_influence_offsets, j, c.group_centers()[j],
+                              c.group_half_extents()[j], refined);
+          bool any_open = false;
+          for (int f = 0; f < kLanes; ++f) {
+            open[f] =
+                group_bound(f, j) > std::max(best, floor) && refined[f] > std::max(best, floor);
+            any_open = any_open || open[f];
+          }
+          if (!any_open) continue;
           for (uint32_t cluster = group_clusters[j]; cluster < group_clusters[j + 1]; ++cluster) {
             if (cluster_mask != nullptr && !(*cluster_mask)[cluster]) continue;
-            const double cluster_bound =
-                box_bound(cluster_influences, cluster_influence_offsets, cluster,
-                          c.cluster_centers()[cluster], c.cluster_half_extents()[cluster]);
-            if (cluster_bound <= std::max(best, floor)) continue;
-            for (uint32_t e = cluster_vertex_offsets[cluster];
-                 e < cluster_vertex_offsets[cluster + 1]; ++e) {
-              const uint32_t i = cluster_vertices[e];
-              PaddedDelta blended = PaddedDelta::Zero();
-              for (uint32_t g = skin.influence_offsets[i]; g < skin.influence_offsets[i + 1]; ++g) {
-                blended.noalias() +=
-                    skin.influence_weights[g] * frame_delta_f[skin.influence_joints[g]];
-              }
-              // Compared squared (sqrt is monotonic): the square root, its conversion and a
-              // compare with `best` in memory were a fifth of the search's time per vertex.
-              const float length_squared =
-                  (blended.leftCols<3>() * skin.positions[i] + blended.col(3)).squaredNorm();
-              if (length_squared > best_squared) {
-                best_squared = length_squared;
-                best = std::sqrt(static_cast<double>(length_squared));
-                best_frame = t;
-                best_vertex = static_cast<int>(i);
-                if (best > decide_within) return;
+            double cluster_bound[kLanes];
+            weighted_box_bounds(cluster_influences, cluster_influence_offsets, cluster,
+                                c.cluster_centers()[cluster], c.cluster_half_extents()[cluster],
+                                cluster_bound);
+            for (int f = 0; f < kLanes; ++f) {
+              if (!open[f] || cluster_bound[f] <= std::max(best, floor)) continue;
+              const PaddedDelta* frame_delta = frame_delta_f.data() + f;
+              for (uint32_t e = cluster_vertex_offsets[cluster];
+                   e < cluster_vertex_offsets[cluster + 1]; ++e) {
+                const uint32_t i = cluster_vertices[e];
+                PaddedDelta blended = PaddedDelta::Zero();
+                for (uint32_t g = skin.influence_offsets[i]; g < skin.influence_offsets[i + 1];
+                     ++g) {
+                  blended.noalias() +=
+                      skin.influence_weights[g] *
+                      frame_delta[static_cast<size_t>(skin.influence_joints[g]) * kLanes];
+                }
+                // Compared squared (sqrt is monotonic): the square root, its conversion and a
+                // compare with `best` in memory were a fifth of the search's time per vertex.
+                const float length_squared =
+                    (blended.leftCols<3>() * skin.positions[i] + blended.col(3)).squaredNorm();
+                if (length_squared > best_squared) {
+                  best_squared = length_squared;
+                  best = std::sqrt(static_cast<double>(length_squared));
+                  best_frame = lane_frame[f];
+                  best_vertex = static_cast<int>(i);
+                  if (best > decide_within) return;
+                }
               }
             }
           }
