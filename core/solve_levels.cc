@@ -818,13 +818,23 @@ void PreparedMotion::Impl::FrameBounds(const Eigen::Matrix<double, Eigen::Dynami
     const auto& group_influence_offsets = c.group_influence_offsets();
     const auto& group_influences = c.group_influences();
     Vec3d* norms = bounds.column_norms.data() + static_cast<size_t>(t) * n;
-    LaneDelta<1> joint_delta;
+    const Eigen::Index stride = frame.rows();
     for (int k : bounds.joints) {
-      const Affine34d dk = frame.block<4, 3>(4 * k, 0).transpose();
-      norms[k] = dk.leftCols<3>().colwise().norm().transpose();
-      joint_delta.Set(0, dk, norms[k]);
-      joint_delta.BoxBounds(c.joint_vertex_centers()[k], c.joint_vertex_half_extents()[k],
-                            &bounds.joint_bound[k]);
+      // LaneDelta::BoxBounds' U_k for the joint's box, with the column norms it needs: their
+      // four square roots as one vector (one at a time, they were most of this loop's time).
+      const Vec3d& center = c.joint_vertex_centers()[k];
+      const Vec3d& half = c.joint_vertex_half_extents()[k];
+      double squared[4] = {};
+      for (int i = 0; i < 3; ++i) {
+        const double* row = frame.data() + i * stride + 4 * k;  // Delta_k's row i
+        for (int a = 0; a < 3; ++a) squared[a] += row[a] * row[a];
+        const double moved = row[0] * center[0] + row[1] * center[1] + row[2] * center[2] + row[3];
+        squared[3] += moved * moved;
+      }
+      double root[4];
+      for (int a = 0; a < 4; ++a) root[a] = std::sqrt(squared[a]);
+      norms[k] = Vec3d(root[0], root[1], root[2]);
+      bounds.joint_bound[k] = root[3] + root[0] * half[0] + root[1] * half[1] + root[2] * half[2];
     }
     for (int j : bounds.groups) {
       double u;
