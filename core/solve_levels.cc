@@ -1225,8 +1225,16 @@ StatusOr<VariantSolution> SolveVariant(const PreparedMotion::Impl& d, const Redu
         }
         BlockSymmetric<1> g_tt(m);
         MatrixXd x_tt(cols, m);
+        // One pass over the frames for the three coefficients (three Eigen column updates
+        // cost more in calls than in arithmetic on short motions).
         const auto subtract_g_tn = [&](int s, int u, const Eigen::Matrix4d& g_su) {
-          for (int r = 0; r < 3; ++r) x_tt.col(s).noalias() -= g_su(3, r) * x_nt.col(3 * u + r);
+          double* __restrict target = x_tt.col(s).data();
+          const double* x0 = x_nt.col(3 * u).data();
+          const double* x1 = x_nt.col(3 * u + 1).data();
+          const double* x2 = x_nt.col(3 * u + 2).data();
+          const double g0 = g_su(3, 0), g1 = g_su(3, 1), g2 = g_su(3, 2);
+          for (int col = 0; col < cols; ++col)
+            target[col] -= g0 * x0[col] + g1 * x1[col] + g2 * x2[col];
         };
         for (int s = 0; s < m; ++s) {
           x_tt.col(s) = bt.col(4 * s + 3);
