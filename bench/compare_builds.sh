@@ -6,7 +6,10 @@
 # BASE_BUILD and NEW_BUILD hold bench/motionlod_bench_bake (MOTIONLOD_BUILD_BENCH=ON; e.g.
 # a `git worktree` of the base commit configured like build-bench/). FILTER is a Google
 # Benchmark regex over bake/ cases; the matching skin/ cases are added. ROUNDS (default
-# 2), MIN_TIME (default 0.3 s) and THREADS (default 1) come from the environment.
+# 2), MIN_TIME (default 0.3 s) and THREADS (default 1) come from the environment, and
+# STAT: `median` (the default: the median of the rounds' medians) or `min` (the fastest
+# repetition of all rounds, steadier where other tenants load the machine: noise only
+# ever adds time).
 set -euo pipefail
 base=${1:?usage: compare_builds.sh BASE_BUILD NEW_BUILD [FILTER]}
 new=${2:?usage: compare_builds.sh BASE_BUILD NEW_BUILD [FILTER]}
@@ -14,6 +17,8 @@ filter=${3:-'(09_11_cmu.fbx|stormtrooper.dae|Orc.gltf)/(vp|vpno\+pd)/default'}
 rounds=${ROUNDS:-2}
 min_time=${MIN_TIME:-0.3}
 threads=${THREADS:-1}
+stat=${STAT:-median}
+case "$stat" in median | min) ;; *) echo "compare_builds: STAT must be median or min" >&2; exit 2 ;; esac
 here=$(cd "$(dirname "$0")/.." && pwd)
 data="$here/../shared/data"
 [ -d "$data" ] || { echo "compare_builds: no $data" >&2; exit 2; }
@@ -34,30 +39,33 @@ for ((round = 0; round < rounds; ++round)); do
     [ "$side" = new ] && build=$new
     "$build/bench/motionlod_bench_bake" --data="$data" --threads="$threads" --benchmark_filter="$full" \
       --benchmark_min_time="$min_time" --benchmark_repetitions=3 \
-      --benchmark_report_aggregates_only=true --benchmark_format=json 2>/dev/null \
+      --benchmark_format=json 2>/dev/null \
       >"$work/$side.$round.json"
   done
 done
-python3 - "$work" "$rounds" "$threads" <<'EOF'
+python3 - "$work" "$rounds" "$threads" "$stat" <<'EOF'
 import json, statistics, sys
-work, rounds, threads = sys.argv[1], int(sys.argv[2]), sys.argv[3]
+work, rounds, threads, stat = sys.argv[1], int(sys.argv[2]), sys.argv[3], sys.argv[4]
+# median: one entry per round (its median); min: every repetition.
 times = {}
 for side in ("base", "new"):
     for r in range(rounds):
         for b in json.load(open(f"{work}/{side}.{r}.json"))["benchmarks"]:
-            if b.get("aggregate_name") != "median":
+            wanted = b.get("aggregate_name") == "median" if stat == "median" else b.get("run_type") == "iteration"
+            if not wanted:
                 continue
             name = b["run_name"].replace(f"/threads:{threads}", "").replace("/manual_time", "")
             scale = {"ns": 1e-6, "us": 1e-3, "ms": 1.0, "s": 1e3}[b["time_unit"]]
             times.setdefault((name, side), []).append(b["real_time"] * scale)
-print(f"| case ({threads} thread{'s' if threads != '1' else ''}) | base ms (ratio) | new ms (ratio) | change |")
+print(f"| case ({threads} thread{'s' if threads != '1' else ''}, {stat}) | base ms (ratio) | new ms (ratio) | change |")
 print("|---|---|---|---|")
 for name in sorted({n for n, _ in times if n.startswith("bake/")}):
     case = name.split("/")[1]
     row = []
     for side in ("base", "new"):
-        bake = statistics.median(times[(name, side)])
-        skin = statistics.median(times[("skin/" + case, side)])
+        pick = statistics.median if stat == "median" else min
+        bake = pick(times[(name, side)])
+        skin = pick(times[("skin/" + case, side)])
         row.append((bake, bake / skin))
     change = 100 * (row[1][0] / row[0][0] - 1)
     print(f"| {name[5:]} | {row[0][0]:.3g} ({row[0][1]:.2f}x) | {row[1][0]:.3g} ({row[1][1]:.2f}x) | {change:+.0f}% |")
