@@ -60,41 +60,66 @@ Eigen::Matrix3d NearestRotation(const Eigen::Matrix3d& a) {
   return x;
 }
 
+namespace {
+
+constexpr int kLanes = 8;
+
+// X^T X's six distinct entries (00, 11, 22, 01, 02, 12) and e^2 = |X^T X - I|_F^2 for
+// NearestRotations' lanes (x[3 c + r][lane]: coefficient (r, c)).
+inline void Gram(const double (&x)[9][kLanes], double (&g)[6][kLanes],
+                 double (&error_squared)[kLanes]) {
+  for (int l = 0; l < kLanes; ++l) {
+    g[0][l] = x[0][l] * x[0][l] + x[1][l] * x[1][l] + x[2][l] * x[2][l];
+    g[1][l] = x[3][l] * x[3][l] + x[4][l] * x[4][l] + x[5][l] * x[5][l];
+    g[2][l] = x[6][l] * x[6][l] + x[7][l] * x[7][l] + x[8][l] * x[8][l];
+    g[3][l] = x[0][l] * x[3][l] + x[1][l] * x[4][l] + x[2][l] * x[5][l];
+    g[4][l] = x[0][l] * x[6][l] + x[1][l] * x[7][l] + x[2][l] * x[8][l];
+    g[5][l] = x[3][l] * x[6][l] + x[4][l] * x[7][l] + x[5][l] * x[8][l];
+    error_squared[l] = (g[0][l] - 1) * (g[0][l] - 1) + (g[1][l] - 1) * (g[1][l] - 1) +
+                       (g[2][l] - 1) * (g[2][l] - 1) +
+                       2 * (g[3][l] * g[3][l] + g[4][l] * g[4][l] + g[5][l] * g[5][l]);
+  }
+}
+
+}  // namespace
+
 void NearestRotations(std::span<Eigen::Matrix3d> matrices) {
   RunWithWidestSimd([&] {
-    constexpr int kLanes = 8;
     const Eigen::Matrix3d identity = Eigen::Matrix3d::Identity();
     for (size_t first = 0; first < matrices.size(); first += kLanes) {
       const int lanes = static_cast<int>(std::min<size_t>(kLanes, matrices.size() - first));
       // x[3 c + r][lane]: coefficient (r, c) of each lane's iterate, column-major as Eigen.
       double x[9][kLanes];
-      bool alone[kLanes] = {};
       for (int l = 0; l < kLanes; ++l) {
-        const Eigen::Matrix3d a = l < lanes ? matrices[first + l] : identity;
-        const double norm_squared = a.squaredNorm();
-        const double norm = std::sqrt(norm_squared);
-        // NearestRotation's start; its first step is Newton-Schulz only if e^2 < 1/4.
-        const Eigen::Matrix3d start = a * (std::sqrt(3.0) / norm);
-        const double error_squared =
-            (start.transpose() * start - Eigen::Matrix3d::Identity()).squaredNorm();
-        alone[l] = !(norm_squared > 0) || !(a.determinant() > 1e-6 * norm * norm_squared) ||
-                   !(error_squared < 0.25);
-        for (int q = 0; q < 9; ++q) x[q][l] = alone[l] ? identity(q) : start(q);
+        const Eigen::Matrix3d& a = l < lanes ? matrices[first + l] : identity;
+        for (int q = 0; q < 9; ++q) x[q][l] = a(q);
+      }
+      // NearestRotation's start and its checks, lane by lane: its first step is
+      // Newton-Schulz only if e^2 < 1/4, and every other lane goes alone.
+      double norm_squared[kLanes], determinant[kLanes], scale[kLanes];
+      for (int l = 0; l < kLanes; ++l) {
+        norm_squared[l] = 0;
+        for (int q = 0; q < 9; ++q) norm_squared[l] += x[q][l] * x[q][l];
+        determinant[l] = x[0][l] * (x[4][l] * x[8][l] - x[7][l] * x[5][l]) -
+                         x[3][l] * (x[1][l] * x[8][l] - x[7][l] * x[2][l]) +
+                         x[6][l] * (x[1][l] * x[5][l] - x[4][l] * x[2][l]);
+        scale[l] = std::sqrt(3.0) / std::sqrt(norm_squared[l]);
+        for (int q = 0; q < 9; ++q) x[q][l] *= scale[l];
+      }
+      double g[6][kLanes];  // X^T X: 00, 11, 22, 01, 02, 12
+      double error_squared[kLanes];
+      Gram(x, g, error_squared);
+      bool alone[kLanes];
+      for (int l = 0; l < kLanes; ++l) {
+        const double norm = std::sqrt(norm_squared[l]);
+        alone[l] = !(norm_squared[l] > 0) || !(determinant[l] > 1e-6 * norm * norm_squared[l]) ||
+                   !(error_squared[l] < 0.25);
+        if (alone[l]) {
+          for (int q = 0; q < 9; ++q) x[q][l] = identity(q);
+        }
       }
       for (int iteration = 0; iteration < 30; ++iteration) {
-        double g[6][kLanes];  // X^T X: 00, 11, 22, 01, 02, 12
-        double error_squared[kLanes];
-        for (int l = 0; l < kLanes; ++l) {
-          g[0][l] = x[0][l] * x[0][l] + x[1][l] * x[1][l] + x[2][l] * x[2][l];
-          g[1][l] = x[3][l] * x[3][l] + x[4][l] * x[4][l] + x[5][l] * x[5][l];
-          g[2][l] = x[6][l] * x[6][l] + x[7][l] * x[7][l] + x[8][l] * x[8][l];
-          g[3][l] = x[0][l] * x[3][l] + x[1][l] * x[4][l] + x[2][l] * x[5][l];
-          g[4][l] = x[0][l] * x[6][l] + x[1][l] * x[7][l] + x[2][l] * x[8][l];
-          g[5][l] = x[3][l] * x[6][l] + x[4][l] * x[7][l] + x[5][l] * x[8][l];
-          error_squared[l] = (g[0][l] - 1) * (g[0][l] - 1) + (g[1][l] - 1) * (g[1][l] - 1) +
-                             (g[2][l] - 1) * (g[2][l] - 1) +
-                             2 * (g[3][l] * g[3][l] + g[4][l] * g[4][l] + g[5][l] * g[5][l]);
-        }
+        Gram(x, g, error_squared);
         const double largest_error_squared =
             *std::max_element(error_squared, error_squared + kLanes);
         if (largest_error_squared < 1e-26) break;
