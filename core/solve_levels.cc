@@ -105,7 +105,7 @@ struct PreparedMotion::Impl {
   // equations, as they are.
   std::vector<std::pair<int, int>> pairs;
   std::vector<Eigen::Matrix4d> pair_cp;
-  std::vector<Eigen::Matrix4d> pair_cn;  // 3x3, padded with a zero row and column (TraceForms)
+  std::vector<Eigen::Matrix4d> pair_cn;  // 3x3, padded with a zero row and column (AddTraceForms)
   std::vector<Eigen::Matrix4d> pair_fit;
   // For the quadratic forms in the kept joints' space (see KeptForms; Workload::kEveryLevel
   // only, empty otherwise): with every frame's matrices shifted by the root's translation
