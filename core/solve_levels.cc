@@ -1130,14 +1130,37 @@ StatusOr<LevelSystem> SolveSystem(const PreparedMotion::Impl& d, const ReducedSk
   const double lambda = d.settings.regularization * (trace > 0 ? trace / dim : 1.0);
   g.AddIdentity(lambda);
 
-  // B^T = (P F + S (J + lambda I) Kt)^T.
+  // B^T = (P F + S (J + lambda I) Kt)^T, slot by slot: its 4 columns of all frames (one
+  // contiguous panel) start as F of its kept joint, gain F of each joint merged into it
+  // (ancestors come first: the same sums in the same order as from zero), then
+  // (J + lambda I) Kt of its kept joint. Plain loops over whole panels, which the AVX2
+  // version runs 256 bits wide; Eigen's column blocks kept 128-bit packets.
   MatrixXd& bt = system.bt;
-  bt = MatrixXd::Zero(cols, dim);
-  for (int k = 0; k < n; ++k) bt.middleCols(4 * phi[k], 4) += d.ft.middleCols(4 * k, 4);
+  bt.resize(cols, dim);
+  const Eigen::Index panel = 4 * static_cast<Eigen::Index>(cols);
+  for (int s = 0; s < m; ++s) {
+    std::copy_n(d.ft.col(4 * level.kept_joints[s]).data(), panel, bt.col(4 * s).data());
+  }
+  for (int k = 0; k < n; ++k) {
+    if (level.kept_joints[phi[k]] == k) continue;
+    double* __restrict target = bt.col(4 * phi[k]).data();
+    const double* source = d.ft.col(4 * k).data();
+    for (Eigen::Index i = 0; i < panel; ++i) target[i] += source[i];
+  }
   for (int s = 0; s < m; ++s) {
     const int j = level.kept_joints[s];
-    bt.middleCols(4 * s, 4).noalias() +=
-        d.ktt.middleCols(4 * j, 4) * (d.joint_fit[j] + lambda * Eigen::Matrix4d::Identity());
+    const Eigen::Matrix4d fit = d.joint_fit[j] + lambda * Eigen::Matrix4d::Identity();
+    const double* kt_panel = d.ktt.col(4 * j).data();
+    double* __restrict target = bt.col(4 * s).data();
+    for (int col = 0; col < cols; ++col) {
+      double q[4];
+      for (int a = 0; a < 4; ++a) q[a] = kt_panel[a * cols + col];
+      for (int c = 0; c < 4; ++c) {
+        double sum = 0;
+        for (int a = 0; a < 4; ++a) sum += q[a] * fit(a, c);
+        target[c * cols + col] += sum;
+      }
+    }
   }
 
   if (m == n) {
