@@ -402,8 +402,9 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
   d.beta_fit = FitsNormals(settings.variant) ? d.beta : 0.0;
   // The kept-space forms' products and constants (see KeptForms), frame by frame; after
   // the normalisation, whose root-only errors stay in the joint pairs' form so that alpha
-  // and beta, and with them every solution, do not depend on the workload.
-  if (workload == Workload::kEveryLevel) {
+  // and beta, and with them every solution, do not depend on the workload. In the widest
+  // vectors this CPU has (base/simd.h): this loop was most of Create's time.
+  if (workload == Workload::kEveryLevel) RunWithWidestSimd([&] {
     d.fp_root = MatrixXd::Zero(4 * n, 3 * frames);
     d.fn_root = MatrixXd::Zero(4 * n, 3 * frames);
     d.const_p.assign(frames, 0.0);
@@ -433,7 +434,7 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
         d.const_n[t] += shifted.block<3, 3>(4 * k, 0).cwiseProduct(fn.block<3, 3>(4 * k, 0)).sum();
       }
     }
-  }
+  });
   d.pair_fit.reserve(d.pairs.size());
   for (const Character::JointPairMoment& moment : c.joint_pair_moments()) {
     Eigen::Matrix4d q = d.alpha * moment.position_moment;
