@@ -236,9 +236,19 @@ StatusOr<Stages> BakeEveryLevel(const core::RawCharacter& raw, const io::Asset& 
   Stages stages;
   auto begin = Clock::now();
   TaskPool pool(threads);
-  auto character = core::BuildCharacter(raw, pool.Runner());
+  // The character and the motion side by side, as pipeline::Bake builds them.
+  std::optional<StatusOr<std::shared_ptr<const core::Character>>> built;
+  std::optional<StatusOr<core::Motion>> sampled;
+  pool.Run(2, [&](int task) {
+    if (task == 0) {
+      built = core::BuildCharacter(raw, pool.Runner());
+    } else {
+      sampled = motion_source.SampleAnimation(animation, 0, &pool);
+    }
+  });
+  auto character = *std::move(built);
   if (!character.ok()) return character.status();
-  auto motion = motion_source.SampleAnimation(animation, 0, &pool);
+  auto motion = *std::move(sampled);
   if (!motion.ok()) return motion.status();
   if (Status status = core::ValidateMotion(*motion, **character); !status.ok()) return status;
   stages.inputs = SecondsSince(begin);
