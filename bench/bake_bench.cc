@@ -225,9 +225,10 @@ struct Stages {
   double total() const { return inputs + rank + prepare + solve + encode; }
 };
 
-// pipeline::Bake's all_levels path on a core::RawCharacter, step by step: build the
-// character and sample the motion (PrepareInputs), rank, prepare, solve every count from
-// n down to the locked minimum on `threads` threads, encode. It exists because
+// pipeline::Bake's all_levels path on a core::RawCharacter, step by step and with Bake's
+// tasks side by side: build the character and sample the motion (PrepareInputs), rank and
+// prepare, solve every count from n down to the locked minimum on `threads` threads,
+// encode. It exists because
 // BakeRequest takes an io::Asset, which cannot be made from a subdivided RawCharacter.
 // Like Bake's timing.bake_seconds, it leaves out the report (built after the timed part).
 StatusOr<Stages> BakeEveryLevel(const core::RawCharacter& raw, const io::Asset& motion_source,
@@ -253,18 +254,27 @@ StatusOr<Stages> BakeEveryLevel(const core::RawCharacter& raw, const io::Asset& 
   if (Status status = core::ValidateMotion(*motion, **character); !status.ok()) return status;
   stages.inputs = SecondsSince(begin);
 
-  begin = Clock::now();
-  auto ranking = core::RankJointsJob{character->get(), &*motion, {}}.Run(pool.Runner());
-  if (!ranking.ok()) return ranking.status();
-  stages.rank = SecondsSince(begin);
-
+  // The ranking and the prepared motion side by side, the ranking first, as in Bake; "prepare"
+  // is the time after the ranking is done (Bake's "prepare" report).
   begin = Clock::now();
   core::SolveSettings settings;
   settings.variant = variant;
-  auto prepared = core::PreparedMotion::Create(*character, *motion, settings,
-                                               core::PreparedMotion::Workload::kEveryLevel);
+  std::optional<StatusOr<core::JointRanking>> ranked;
+  std::optional<StatusOr<std::shared_ptr<const core::PreparedMotion>>> created;
+  pool.Run(2, [&](int task) {
+    if (task == 0) {
+      ranked = core::RankJointsJob{character->get(), &*motion, {}}.Run(pool.Runner());
+      stages.rank = SecondsSince(begin);
+    } else {
+      created = core::PreparedMotion::Create(*character, *motion, settings,
+                                             core::PreparedMotion::Workload::kEveryLevel);
+    }
+  });
+  auto ranking = *std::move(ranked);
+  if (!ranking.ok()) return ranking.status();
+  auto prepared = *std::move(created);
   if (!prepared.ok()) return prepared.status();
-  stages.prepare = SecondsSince(begin);
+  stages.prepare = SecondsSince(begin) - stages.rank;
 
   begin = Clock::now();
   const int n = (*character)->joint_count();
