@@ -266,8 +266,9 @@ StatusOr<Stages> BakeEveryLevel(const core::RawCharacter& raw, const io::Asset& 
       ranked = core::RankJointsJob{character->get(), &*motion, {}}.Run(pool.Runner());
       stages.rank = SecondsSince(begin);
     } else {
-      created = core::PreparedMotion::Create(*character, *motion, settings,
-                                             core::PreparedMotion::Workload::kEveryLevel);
+      created =
+          core::PreparedMotion::Create(*character, *motion, settings,
+                                       core::PreparedMotion::Workload::kEveryLevel, pool.Runner());
     }
   });
   auto ranking = *std::move(ranked);

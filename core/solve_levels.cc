@@ -335,8 +335,8 @@ double PreparedMotion::beta() const { return impl_->beta; }
 const MatrixXd& PreparedMotion::original_matrices() const { return impl_->kt; }
 
 StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
-    std::shared_ptr<const Character> character, const Motion& motion,
-    const SolveSettings& settings, Workload workload) {
+    std::shared_ptr<const Character> character, const Motion& motion, const SolveSettings& settings,
+    Workload workload, const PieceRunner& run) {
   if (!character) return InvalidArgument("PreparedMotion: no character");
   if (Status status = settings.Validate(); !status.ok()) return status;
   if (Status status = ValidateMotion(motion, *character); !status.ok()) return status;
@@ -402,41 +402,46 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
   d.beta_fit = FitsNormals(settings.variant) ? d.beta : 0.0;
   // The kept-space forms' products and constants (see KeptForms), frame by frame; after
   // the normalisation, whose root-only errors stay in the joint pairs' form so that alpha
-  // and beta, and with them every solution, do not depend on the workload. In the widest
-  // vectors this CPU has (base/simd.h): this loop was most of Create's time.
+  // and beta, and with them every solution, do not depend on the workload. Most of
+  // Create's time: in pieces of frames (each frame's columns are its own), each in the
+  // widest vectors this CPU has (base/simd.h).
   if (workload == Workload::kEveryLevel) {
-    RunWithWidestSimd([&] {
-      d.fp_root = MatrixXd::Zero(4 * n, 3 * frames);
-      d.fn_root = MatrixXd::Zero(4 * n, 3 * frames);
-      d.const_p.assign(frames, 0.0);
-      d.const_n.assign(frames, 0.0);
-      Eigen::Matrix<double, Eigen::Dynamic, 3> shifted(4 * n, 3);
-      for (int t = 0; t < frames; ++t) {
-        shifted = d.kt.middleCols<3>(3 * t);
-        const Eigen::RowVector3d root = d.kt.block<1, 3>(3, 3 * t);
-        for (int k = 0; k < n; ++k) shifted.row(4 * k + 3) -= root;
-        auto fp = d.fp_root.middleCols<3>(3 * t);
-        auto fn = d.fn_root.middleCols<3>(3 * t);
-        for (size_t q = 0; q < d.pairs.size(); ++q) {
-          const auto [k, l] = d.pairs[q];
-          // The moments themselves: pair_cp and pair_cn have off-diagonal pairs doubled.
-          const double single = k == l ? 1.0 : 0.5;
-          const Eigen::Matrix4d cp = single * d.pair_cp[q];
-          const Eigen::Matrix3d cn = single * d.pair_cn[q].topLeftCorner<3, 3>();
-          fp.block<4, 3>(4 * k, 0).noalias() += cp * shifted.block<4, 3>(4 * l, 0);
-          fn.block<3, 3>(4 * k, 0).noalias() += cn * shifted.block<3, 3>(4 * l, 0);
-          if (k != l) {
-            fp.block<4, 3>(4 * l, 0).noalias() += cp * shifted.block<4, 3>(4 * k, 0);
-            fn.block<3, 3>(4 * l, 0).noalias() += cn * shifted.block<3, 3>(4 * k, 0);
+    d.fp_root = MatrixXd::Zero(4 * n, 3 * frames);
+    d.fn_root = MatrixXd::Zero(4 * n, 3 * frames);
+    d.const_p.assign(frames, 0.0);
+    d.const_n.assign(frames, 0.0);
+    constexpr int kFramesPerPiece = 16;
+    RunPieces(run, (frames + kFramesPerPiece - 1) / kFramesPerPiece, [&](int piece) {
+      RunWithWidestSimd([&] {
+        Eigen::Matrix<double, Eigen::Dynamic, 3> shifted(4 * n, 3);
+        for (int t = piece * kFramesPerPiece; t < std::min(frames, (piece + 1) * kFramesPerPiece);
+             ++t) {
+          shifted = d.kt.middleCols<3>(3 * t);
+          const Eigen::RowVector3d root = d.kt.block<1, 3>(3, 3 * t);
+          for (int k = 0; k < n; ++k) shifted.row(4 * k + 3) -= root;
+          auto fp = d.fp_root.middleCols<3>(3 * t);
+          auto fn = d.fn_root.middleCols<3>(3 * t);
+          for (size_t q = 0; q < d.pairs.size(); ++q) {
+            const auto [k, l] = d.pairs[q];
+            // The moments themselves: pair_cp and pair_cn have off-diagonal pairs doubled.
+            const double single = k == l ? 1.0 : 0.5;
+            const Eigen::Matrix4d cp = single * d.pair_cp[q];
+            const Eigen::Matrix3d cn = single * d.pair_cn[q].topLeftCorner<3, 3>();
+            fp.block<4, 3>(4 * k, 0).noalias() += cp * shifted.block<4, 3>(4 * l, 0);
+            fn.block<3, 3>(4 * k, 0).noalias() += cn * shifted.block<3, 3>(4 * l, 0);
+            if (k != l) {
+              fp.block<4, 3>(4 * l, 0).noalias() += cp * shifted.block<4, 3>(4 * k, 0);
+              fn.block<3, 3>(4 * l, 0).noalias() += cn * shifted.block<3, 3>(4 * k, 0);
+            }
+          }
+          for (int k = 0; k < n; ++k) {
+            d.const_p[t] +=
+                shifted.block<4, 3>(4 * k, 0).cwiseProduct(fp.block<4, 3>(4 * k, 0)).sum();
+            d.const_n[t] +=
+                shifted.block<3, 3>(4 * k, 0).cwiseProduct(fn.block<3, 3>(4 * k, 0)).sum();
           }
         }
-        for (int k = 0; k < n; ++k) {
-          d.const_p[t] +=
-              shifted.block<4, 3>(4 * k, 0).cwiseProduct(fp.block<4, 3>(4 * k, 0)).sum();
-          d.const_n[t] +=
-              shifted.block<3, 3>(4 * k, 0).cwiseProduct(fn.block<3, 3>(4 * k, 0)).sum();
-        }
-      }
+      });
     });
   }
   d.pair_fit.reserve(d.pairs.size());

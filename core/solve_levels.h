@@ -48,6 +48,7 @@
 #include <string_view>
 #include <vector>
 
+#include "base/pieces.h"
 #include "base/status.h"
 #include "core/character.h"
 #include "core/motion.h"
@@ -119,10 +120,13 @@ class PreparedMotion {
   // in Create), after which a level's forms cost its kept joints instead of every joint
   // pair: a gain once many levels keep few joints (8% of an every-level bake of
   // stormtrooper), a loss for a ladder of four or five. Results agree to rounding.
+  // Its per-frame work is split into pieces on `run` (base/pieces.h); the result does not
+  // depend on the runner.
   enum class Workload { kSomeLevels, kEveryLevel };
   static StatusOr<std::shared_ptr<const PreparedMotion>> Create(
       std::shared_ptr<const Character> character, const Motion& motion,
-      const SolveSettings& settings, Workload workload = Workload::kSomeLevels);
+      const SolveSettings& settings, Workload workload = Workload::kSomeLevels,
+      const PieceRunner& run = {});
   ~PreparedMotion();
 
   const Character& character() const;

@@ -262,7 +262,8 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
           created = core::PreparedMotion::Create(inputs->character, motion, request.settings,
                                                  request.all_levels
                                                      ? core::PreparedMotion::Workload::kEveryLevel
-                                                     : core::PreparedMotion::Workload::kSomeLevels);
+                                                     : core::PreparedMotion::Workload::kSomeLevels,
+                                                 pool.Runner());
         }
       },
       [&](int) {
@@ -378,8 +379,9 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
                                   core::Variant::kVPNOPD}) {
       core::SolveSettings settings = request.settings;
       settings.variant = variant;
-      auto variant_prepared = core::PreparedMotion::Create(inputs->character, motion, settings,
-                                                           core::PreparedMotion::Workload::kEveryLevel);
+      auto variant_prepared =
+          core::PreparedMotion::Create(inputs->character, motion, settings,
+                                       core::PreparedMotion::Workload::kEveryLevel, pool.Runner());
       if (!variant_prepared.ok()) return variant_prepared.status();
       std::vector<int> every;
       for (int count = n; count >= minimum; --count) every.push_back(count);

@@ -1,5 +1,3 @@
-#include "base/parallel.h"
-
 #include <gtest/gtest.h>
 
 #include <atomic>
@@ -8,10 +6,13 @@
 #include <thread>
 #include <vector>
 
+#include "base/parallel.h"
 #include "core/character.h"
 #include "core/rank_joints.h"
-#include "pipeline/bake.h"
+#include "core/reduce_skeleton.h"
+#include "core/solve_levels.h"
 #include "io/asset.h"
+#include "pipeline/bake.h"
 
 namespace motionlod {
 namespace {
@@ -153,6 +154,41 @@ TEST(TaskPool, RanksTheSameAsOneThread) {
     EXPECT_EQ(split.rotational, one.rotational) << file;
     EXPECT_EQ(split.priority, one.priority) << file;
     EXPECT_EQ(split.removal_order, one.removal_order) << file;
+  }
+}
+
+// An every-level prepared motion made in pieces on a pool solves the levels it solves made
+// on one thread, to the bit (its kept-space forms are per frame).
+TEST(TaskPool, PreparesTheSameMotionAsOneThread) {
+  const std::filesystem::path data = MOTIONLOD_SHARED_DATA;
+  if (!std::filesystem::exists(data / "MANIFEST.md")) GTEST_SKIP() << "../shared/data is absent";
+  TaskPool pool(2);
+  for (const char* file : {"characters/stormtrooper.dae", "motions/09_11_cmu.fbx"}) {
+    auto asset = io::LoadAssetFile(data / file);
+    ASSERT_TRUE(asset.ok()) << file;
+    pipeline::BakeRequest request;
+    request.character = *asset;
+    request.threads = 1;
+    const auto inputs = pipeline::PrepareInputs(request);
+    ASSERT_TRUE(inputs.ok()) << file;
+    const auto ranking = *core::RankJointsJob{inputs->character.get(), &inputs->motion, {}}.Run();
+    constexpr auto kEveryLevel = core::PreparedMotion::Workload::kEveryLevel;
+    const auto one =
+        *core::PreparedMotion::Create(inputs->character, inputs->motion, {}, kEveryLevel);
+    const auto split = *core::PreparedMotion::Create(inputs->character, inputs->motion, {},
+                                                     kEveryLevel, pool.Runner());
+    const int n = inputs->character->joint_count();
+    for (int kept : {n - 1, n / 2, 3}) {
+      const auto level = *core::ReduceSkeletonToCount(*inputs->character, ranking, kept);
+      const auto a = *split->SolveLevel(level);
+      const auto b = *one->SolveLevel(level);
+      EXPECT_GT(b.optimized.mean_e, 0) << file << " at " << kept;
+      EXPECT_EQ(a.optimized.e, b.optimized.e) << file << " at " << kept;
+      EXPECT_EQ(a.optimized.ep_vertex, b.optimized.ep_vertex) << file << " at " << kept;
+      EXPECT_EQ(a.optimized.en_vertex, b.optimized.en_vertex) << file << " at " << kept;
+      EXPECT_EQ(a.optimized.max_vertex_error_pct, b.optimized.max_vertex_error_pct) << file;
+      EXPECT_EQ(a.baseline.e, b.baseline.e) << file << " at " << kept;
+    }
   }
 }
 
