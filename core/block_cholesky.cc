@@ -11,28 +11,6 @@ namespace motionlod::core {
 
 namespace {
 
-// Row i of panel_r becomes M times row i of panel_q, added to what it holds with
-// kAccumulate. Iteration i reads and writes row i only, so the panels may be the same one
-// (the diagonal steps of the solves) and the loop vectorises over the rows.
-template <int B, bool kAccumulate>
-void PanelProduct(double* panel_r, const double* panel_q, const Eigen::Matrix<double, B, B>& m,
-                  Eigen::Index rows, Eigen::Index column_stride) {
-  double coefficient[B][B];
-  for (int c = 0; c < B; ++c) {
-    for (int a = 0; a < B; ++a) coefficient[c][a] = m(c, a);
-  }
-#pragma GCC ivdep
-  for (Eigen::Index i = 0; i < rows; ++i) {
-    double q[B];
-    for (int a = 0; a < B; ++a) q[a] = panel_q[a * column_stride + i];
-    for (int c = 0; c < B; ++c) {
-      double sum = kAccumulate ? panel_r[c * column_stride + i] : 0.0;
-      for (int a = 0; a < B; ++a) sum += coefficient[c][a] * q[a];
-      panel_r[c * column_stride + i] = sum;
-    }
-  }
-}
-
 template <int B>
 void MultiplyPanel(double* panel, const Eigen::Matrix<double, B, B>& m, Eigen::Index rows,
                    Eigen::Index column_stride) {
@@ -40,12 +18,6 @@ void MultiplyPanel(double* panel, const Eigen::Matrix<double, B, B>& m, Eigen::I
 }
 
 }  // namespace
-
-template <int B>
-void AddPanelProduct(double* panel_r, const double* panel_q, const Eigen::Matrix<double, B, B>& m,
-                     Eigen::Index rows, Eigen::Index column_stride) {
-  PanelProduct<B, true>(panel_r, panel_q, m, rows, column_stride);
-}
 
 template <int B>
 BlockSymmetric<B>::BlockSymmetric(int block_count)
@@ -168,8 +140,6 @@ Eigen::MatrixXd BlockCholesky<B>::SolveTransposed(const Eigen::MatrixXd& bt) con
   });
 }
 
-template void AddPanelProduct<4>(double*, const double*, const Eigen::Matrix<double, 4, 4>&, Eigen::Index,
-                                 Eigen::Index);
 template class BlockSymmetric<1>;
 template class BlockSymmetric<4>;
 template class BlockCholesky<1>;

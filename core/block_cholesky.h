@@ -23,11 +23,37 @@ using ::motionlod::Status;
 using ::motionlod::StatusOr;
 
 // Panels of B columns of `rows` doubles each, column c at column_stride * c from the
-// first: row i of panel_r gains M times row i of panel_q (the panels must not overlap).
-// The loop runs along the rows, so it vectorises over them.
+// first: row i of panel_r becomes M times row i of panel_q, added to what it holds with
+// kAccumulate. Iteration i reads and writes row i only, so the panels may be the same one
+// (the diagonal steps of the solves) and the loop vectorises over the rows. Inline, so
+// that a caller's AVX2 version (base/simd.h) runs it 256 bits wide.
+template <int B, bool kAccumulate>
+inline void PanelProduct(double* panel_r, const double* panel_q,
+                         const Eigen::Matrix<double, B, B>& m, Eigen::Index rows,
+                         Eigen::Index column_stride) {
+  double coefficient[B][B];
+  for (int c = 0; c < B; ++c) {
+    for (int a = 0; a < B; ++a) coefficient[c][a] = m(c, a);
+  }
+#pragma GCC ivdep
+  for (Eigen::Index i = 0; i < rows; ++i) {
+    double q[B];
+    for (int a = 0; a < B; ++a) q[a] = panel_q[a * column_stride + i];
+    for (int c = 0; c < B; ++c) {
+      double sum = kAccumulate ? panel_r[c * column_stride + i] : 0.0;
+      for (int a = 0; a < B; ++a) sum += coefficient[c][a] * q[a];
+      panel_r[c * column_stride + i] = sum;
+    }
+  }
+}
+
+// Row i of panel_r gains M times row i of panel_q (the panels must not overlap).
 template <int B>
-void AddPanelProduct(double* panel_r, const double* panel_q, const Eigen::Matrix<double, B, B>& m,
-                     Eigen::Index rows, Eigen::Index column_stride);
+inline void AddPanelProduct(double* panel_r, const double* panel_q,
+                            const Eigen::Matrix<double, B, B>& m, Eigen::Index rows,
+                            Eigen::Index column_stride) {
+  PanelProduct<B, true>(panel_r, panel_q, m, rows, column_stride);
+}
 
 template <int B>
 class BlockSymmetric {

@@ -400,6 +400,8 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
     d.beta = max_en > 1e-20 ? 1.0 / max_en : 1.0;
   }
   d.beta_fit = FitsNormals(settings.variant) ? d.beta : 0.0;
+  // The per-frame work below runs in pieces of frames on `run`.
+  constexpr int kFramesPerPiece = 16;
   // The kept-space forms' products and constants (see KeptForms), frame by frame; after
   // the normalisation, whose root-only errors stay in the joint pairs' form so that alpha
   // and beta, and with them every solution, do not depend on the workload. Most of
@@ -410,7 +412,6 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
     d.fn_root = MatrixXd::Zero(4 * n, 3 * frames);
     d.const_p.assign(frames, 0.0);
     d.const_n.assign(frames, 0.0);
-    constexpr int kFramesPerPiece = 16;
     RunPieces(run, (frames + kFramesPerPiece - 1) / kFramesPerPiece, [&](int piece) {
       RunWithWidestSimd([&] {
         Eigen::Matrix<double, Eigen::Dynamic, 3> shifted(4 * n, 3);
@@ -452,18 +453,25 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
   }
   d.ktt = d.kt.transpose();
   // F^T = Kt^T Q, one pair at a time: F_k += Q_kl Kt_l and F_l += Q_kl^T Kt_k, each a
-  // product of 4 contiguous columns of all frames (a sparse-dense product would update
-  // one coefficient at a time).
+  // product of 4 contiguous columns (a sparse-dense product would update one coefficient
+  // at a time); in pieces of frames (rows), each in the widest vectors this CPU has.
   d.ft = MatrixXd::Zero(3 * frames, 4 * n);
   const Eigen::Index ft_stride = d.ft.rows();
-  for (size_t q = 0; q < d.pairs.size(); ++q) {
-    const auto [k, l] = d.pairs[q];
-    AddPanelProduct<4>(d.ft.col(4 * k).data(), d.ktt.col(4 * l).data(), d.pair_fit[q], ft_stride, ft_stride);
-    if (k != l) {
-      AddPanelProduct<4>(d.ft.col(4 * l).data(), d.ktt.col(4 * k).data(), d.pair_fit[q].transpose(),
-                         ft_stride, ft_stride);
-    }
-  }
+  RunPieces(run, (frames + kFramesPerPiece - 1) / kFramesPerPiece, [&](int piece) {
+    RunWithWidestSimd([&] {
+      const Eigen::Index first = 3 * piece * kFramesPerPiece;
+      const Eigen::Index rows = std::min<Eigen::Index>(3 * kFramesPerPiece, ft_stride - first);
+      for (size_t q = 0; q < d.pairs.size(); ++q) {
+        const auto [k, l] = d.pairs[q];
+        AddPanelProduct<4>(d.ft.col(4 * k).data() + first, d.ktt.col(4 * l).data() + first,
+                           d.pair_fit[q], rows, ft_stride);
+        if (k != l) {
+          AddPanelProduct<4>(d.ft.col(4 * l).data() + first, d.ktt.col(4 * k).data() + first,
+                             d.pair_fit[q].transpose(), rows, ft_stride);
+        }
+      }
+    });
+  });
   d.joint_fit.resize(n);
   for (int j = 0; j < n; ++j) {
     d.joint_fit[j] = d.alpha * d.joint_cp[j] + d.beta_fit * d.joint_cn[j];
@@ -1159,18 +1167,9 @@ StatusOr<LevelSystem> SolveSystem(const PreparedMotion::Impl& d, const ReducedSk
   }
   for (int s = 0; s < m; ++s) {
     const int j = level.kept_joints[s];
-    const Eigen::Matrix4d fit = d.joint_fit[j] + lambda * Eigen::Matrix4d::Identity();
-    const double* kt_panel = d.ktt.col(4 * j).data();
-    double* __restrict target = bt.col(4 * s).data();
-    for (int col = 0; col < cols; ++col) {
-      double q[4];
-      for (int a = 0; a < 4; ++a) q[a] = kt_panel[a * cols + col];
-      for (int c = 0; c < 4; ++c) {
-        double sum = 0;
-        for (int a = 0; a < 4; ++a) sum += q[a] * fit(a, c);
-        target[c * cols + col] += sum;
-      }
-    }
+    // Row by row, Kt's row times J + lambda I, which is symmetric.
+    AddPanelProduct<4>(bt.col(4 * s).data(), d.ktt.col(4 * j).data(),
+                       d.joint_fit[j] + lambda * Eigen::Matrix4d::Identity(), cols, cols);
   }
 
   if (m == n) {
