@@ -17,7 +17,8 @@
 //   bake/<case>@<p>v/<variant>/all/...     subdivided to p >= 10k vertices, every level
 //                                          (see BakeEveryLevel: Bake takes an io::Asset, so
 //                                          the subdivided character runs Bake's all_levels
-//                                          path step by step)
+//                                          path step by step); counter insitu_ratio: each
+//                                          bake over a skinning pass run right after it
 //   naive/<case>, level/<case>, ls/<case>  one mid level (round(n/2) joints, vpno+pd settings,
 //                                          1 thread): core::SolveFrameNaive on a few evenly
 //                                          spaced frames, scaled by T / frames to the whole
@@ -311,6 +312,7 @@ StatusOr<Stages> BakeEveryLevel(const core::RawCharacter& raw, const io::Asset& 
 void BM_BakeEveryLevel(benchmark::State& state, const core::RawCharacter* raw, const Case* c,
                        const core::Character* built, core::Variant variant, int threads) {
   Stages sum;
+  double insitu_ratio_sum = 0;
   for (auto _ : state) {
     auto stages = BakeEveryLevel(*raw, c->motion ? *c->motion : *c->character, c->animation,
                                  variant, threads);
@@ -319,6 +321,9 @@ void BM_BakeEveryLevel(benchmark::State& state, const core::RawCharacter* raw, c
       return;
     }
     state.SetIterationTime(stages->total());
+    // Paired, as Bake's report pairs them: a skinning pass right after the bake, untimed.
+    insitu_ratio_sum +=
+        stages->total() / pipeline::SkinningPassSeconds(*built, c->sampled, threads);
     sum.inputs += stages->inputs;
     sum.rank += stages->rank;
     sum.prepare += stages->prepare;
@@ -328,6 +333,7 @@ void BM_BakeEveryLevel(benchmark::State& state, const core::RawCharacter* raw, c
   ShapeCounters(state, *built, c->sampled);
   const double iterations = std::max<double>(1, static_cast<double>(state.iterations()));
   state.counters["levels"] = built->joint_count();  // every count down to the root
+  state.counters["insitu_ratio"] = insitu_ratio_sum / iterations;
   state.counters["inputs_s"] = sum.inputs / iterations;
   state.counters["rank_s"] = sum.rank / iterations;
   state.counters["prepare_s"] = sum.prepare / iterations;
