@@ -135,18 +135,23 @@ TEST(TaskPool, BuildsTheSameCharacterAsOneThread) {
   }
 }
 
+// What a one-thread bake of `file` (in ../shared/data) works on.
+StatusOr<pipeline::BakeInputs> InputsOf(const char* file) {
+  auto asset = io::LoadAssetFile(std::filesystem::path(MOTIONLOD_SHARED_DATA) / file);
+  if (!asset.ok()) return asset.status();
+  pipeline::BakeRequest request;
+  request.character = *asset;
+  request.threads = 1;
+  return pipeline::PrepareInputs(request);
+}
+
 // The ranking's pieces on a pool give the ranking of one thread, to the bit.
 TEST(TaskPool, RanksTheSameAsOneThread) {
   const std::filesystem::path data = MOTIONLOD_SHARED_DATA;
   if (!std::filesystem::exists(data / "MANIFEST.md")) GTEST_SKIP() << "../shared/data is absent";
   TaskPool pool(2);
   for (const char* file : {"motions/55_01_cmu.fbx", "characters/RobotExpressive.glb"}) {
-    auto asset = io::LoadAssetFile(data / file);
-    ASSERT_TRUE(asset.ok()) << file;
-    pipeline::BakeRequest request;
-    request.character = *asset;
-    request.threads = 1;
-    const auto inputs = pipeline::PrepareInputs(request);
+    const auto inputs = InputsOf(file);
     ASSERT_TRUE(inputs.ok()) << file;
     const core::RankJointsJob job{inputs->character.get(), &inputs->motion, {}};
     const auto one = *job.Run();
@@ -164,12 +169,7 @@ TEST(TaskPool, PreparesTheSameMotionAsOneThread) {
   if (!std::filesystem::exists(data / "MANIFEST.md")) GTEST_SKIP() << "../shared/data is absent";
   TaskPool pool(2);
   for (const char* file : {"characters/stormtrooper.dae", "motions/09_11_cmu.fbx"}) {
-    auto asset = io::LoadAssetFile(data / file);
-    ASSERT_TRUE(asset.ok()) << file;
-    pipeline::BakeRequest request;
-    request.character = *asset;
-    request.threads = 1;
-    const auto inputs = pipeline::PrepareInputs(request);
+    const auto inputs = InputsOf(file);
     ASSERT_TRUE(inputs.ok()) << file;
     const auto ranking = *core::RankJointsJob{inputs->character.get(), &inputs->motion, {}}.Run();
     constexpr auto kEveryLevel = core::PreparedMotion::Workload::kEveryLevel;
