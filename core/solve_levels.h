@@ -120,9 +120,9 @@ class PreparedMotion {
   // in Create), after which a level's forms cost its kept joints instead of every joint
   // pair: a gain once many levels keep few joints (8% of an every-level bake of
   // stormtrooper), a loss for a ladder of four or five. Results agree to rounding.
-  // Its per-frame work is split into pieces on `run` (base/pieces.h); the result does not
-  // depend on the runner.
   enum class Workload { kSomeLevels, kEveryLevel };
+  // Create's per-frame work runs in pieces on `run` (base/pieces.h); the result does not
+  // depend on the runner.
   static StatusOr<std::shared_ptr<const PreparedMotion>> Create(
       std::shared_ptr<const Character> character, const Motion& motion,
       const SolveSettings& settings, Workload workload = Workload::kSomeLevels,
