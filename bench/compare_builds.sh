@@ -14,36 +14,19 @@ set -euo pipefail
 base=${1:?usage: compare_builds.sh BASE_BUILD NEW_BUILD [FILTER]}
 new=${2:?usage: compare_builds.sh BASE_BUILD NEW_BUILD [FILTER]}
 filter=${3:-'(09_11_cmu.fbx|stormtrooper.dae|Orc.gltf)/(vp|vpno\+pd)/default'}
-rounds=${ROUNDS:-2}
-min_time=${MIN_TIME:-0.3}
-threads=${THREADS:-1}
+ROUNDS=${ROUNDS:-2}
+THREADS=${THREADS:-1}
 stat=${STAT:-median}
 case "$stat" in median | min) ;; *) echo "compare_builds: STAT must be median or min" >&2; exit 2 ;; esac
-here=$(cd "$(dirname "$0")/.." && pwd)
-data="$here/../shared/data"
-[ -d "$data" ] || { echo "compare_builds: no $data" >&2; exit 2; }
-for build in "$base" "$new"; do
-  [ -x "$build/bench/motionlod_bench_bake" ] || {
-    echo "compare_builds: no $build/bench/motionlod_bench_bake" >&2
-    exit 2
-  }
-done
 # The skinning passes of the files the filter names, e.g. skin/Orc.gltf/threads:1.
 cases=$(sed -E 's/^\(([^)]*)\)\/.*$/\1/; t; s/\/.*$//' <<<"$filter")
-full="bake/$filter/threads:$threads|skin/($cases)/threads:$threads"
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
-for ((round = 0; round < rounds; ++round)); do
-  for side in base new; do
-    build=$base
-    [ "$side" = new ] && build=$new
-    "$build/bench/motionlod_bench_bake" --data="$data" --threads="$threads" --benchmark_filter="$full" \
-      --benchmark_min_time="$min_time" --benchmark_repetitions=3 \
-      --benchmark_format=json 2>/dev/null \
-      >"$work/$side.$round.json"
-  done
-done
-python3 - "$work" "$rounds" "$threads" "$stat" <<'EOF'
+# shellcheck source=bench/side_by_side.sh
+source "$(dirname "$0")/side_by_side.sh"
+run_side_by_side compare_builds "$base" "$new" \
+  "bake/$filter/threads:$THREADS|skin/($cases)/threads:$THREADS" "$work"
+python3 - "$work" "$ROUNDS" "$THREADS" "$stat" <<'EOF'
 import json, statistics, sys
 work, rounds, threads, stat = sys.argv[1], int(sys.argv[2]), sys.argv[3], sys.argv[4]
 # median: one entry per round (its median); min: every repetition.

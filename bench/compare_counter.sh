@@ -13,30 +13,14 @@ base=${1:?usage: compare_counter.sh BASE_BUILD NEW_BUILD FILTER COUNTER}
 new=${2:?usage: compare_counter.sh BASE_BUILD NEW_BUILD FILTER COUNTER}
 filter=${3:?usage: compare_counter.sh BASE_BUILD NEW_BUILD FILTER COUNTER}
 counter=${4:?usage: compare_counter.sh BASE_BUILD NEW_BUILD FILTER COUNTER}
-rounds=${ROUNDS:-3}
-min_time=${MIN_TIME:-0.3}
-threads=${THREADS:-1}
-here=$(cd "$(dirname "$0")/.." && pwd)
-data="$here/../shared/data"
-[ -d "$data" ] || { echo "compare_counter: no $data" >&2; exit 2; }
-for build in "$base" "$new"; do
-  [ -x "$build/bench/motionlod_bench_bake" ] || {
-    echo "compare_counter: no $build/bench/motionlod_bench_bake" >&2
-    exit 2
-  }
-done
+ROUNDS=${ROUNDS:-3}
+THREADS=${THREADS:-1}
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
-for ((round = 0; round < rounds; ++round)); do
-  for side in base new; do
-    build=$base
-    [ "$side" = new ] && build=$new
-    "$build/bench/motionlod_bench_bake" --data="$data" --threads="$threads" \
-      --benchmark_filter="bake/$filter/threads:$threads" --benchmark_min_time="$min_time" \
-      --benchmark_repetitions=3 --benchmark_format=json 2>/dev/null >"$work/$side.$round.json"
-  done
-done
-python3 - "$work" "$rounds" "$threads" "$counter" <<'PY'
+# shellcheck source=bench/side_by_side.sh
+source "$(dirname "$0")/side_by_side.sh"
+run_side_by_side compare_counter "$base" "$new" "bake/$filter/threads:$THREADS" "$work"
+python3 - "$work" "$ROUNDS" "$THREADS" "$counter" <<'PY'
 import json, sys
 work, rounds, threads, counter = sys.argv[1], int(sys.argv[2]), sys.argv[3], sys.argv[4]
 values = {}
