@@ -1,10 +1,11 @@
 #include "core/character.h"
 
+#include <gtest/gtest.h>
+
 #include <algorithm>
 #include <cmath>
+#include <string>
 #include <vector>
-
-#include <gtest/gtest.h>
 
 #include "tests/core/fixtures.h"
 
@@ -236,6 +237,19 @@ TEST(ValidateMotion, RejectsShapeAndValueErrors) {
   bad = m;
   bad.joint_count = 7;
   EXPECT_FALSE(ValidateMotion(bad, *c).ok());
+  // Each kind of bad matrix, first, inside and last, named by frame and joint: a
+  // translation (no determinant sees it) and a rank-deficient rotation part.
+  const int n = m.joint_count;
+  for (const int q : {0, n + 2, static_cast<int>(m.joint_world.size()) - 1}) {
+    const std::string where =
+        "frame " + std::to_string(q / n) + ", joint '" + c->skeleton().joint_names[q % n] + "'";
+    bad = m;
+    bad.joint_world[q](2, 3) = NAN;
+    EXPECT_EQ(ValidateMotion(bad, *c).message(), "non-finite joint matrix at " + where);
+    bad = m;
+    bad.joint_world[q].col(2) = bad.joint_world[q].col(1);
+    EXPECT_EQ(ValidateMotion(bad, *c).message(), "singular joint matrix at " + where);
+  }
 }
 
 }  // namespace
