@@ -26,20 +26,18 @@ trap 'rm -rf "$work"' EXIT
 source "$(dirname "$0")/side_by_side.sh"
 run_side_by_side compare_builds "$base" "$new" \
   "bake/$filter/threads:$THREADS|skin/($cases)/threads:$THREADS" "$work"
-python3 - "$work" "$ROUNDS" "$THREADS" "$stat" <<'EOF'
-import json, statistics, sys
+python3 - "$work" "$ROUNDS" "$THREADS" "$stat" "$(dirname "$0")" <<'EOF'
+import statistics, sys
 work, rounds, threads, stat = sys.argv[1], int(sys.argv[2]), sys.argv[3], sys.argv[4]
+sys.path.insert(0, sys.argv[5])
+from side_by_side import side_by_side_results
 # median: one entry per round (its median); min: every repetition.
 times = {}
-for side in ("base", "new"):
-    for r in range(rounds):
-        for b in json.load(open(f"{work}/{side}.{r}.json"))["benchmarks"]:
-            wanted = b.get("aggregate_name") == "median" if stat == "median" else b.get("run_type") == "iteration"
-            if not wanted:
-                continue
-            name = b["run_name"].replace(f"/threads:{threads}", "").replace("/manual_time", "")
-            scale = {"ns": 1e-6, "us": 1e-3, "ms": 1.0, "s": 1e3}[b["time_unit"]]
-            times.setdefault((name, side), []).append(b["real_time"] * scale)
+for side, name, b in side_by_side_results(work, rounds, threads):
+    wanted = b.get("aggregate_name") == "median" if stat == "median" else b.get("run_type") == "iteration"
+    if wanted:
+        scale = {"ns": 1e-6, "us": 1e-3, "ms": 1.0, "s": 1e3}[b["time_unit"]]
+        times.setdefault((name, side), []).append(b["real_time"] * scale)
 print(f"| case ({threads} thread{'s' if threads != '1' else ''}, {stat}) | base ms (ratio) | new ms (ratio) | change |")
 print("|---|---|---|---|")
 for name in sorted({n for n, _ in times if n.startswith("bake/")}):

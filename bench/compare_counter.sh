@@ -20,17 +20,15 @@ trap 'rm -rf "$work"' EXIT
 # shellcheck source=bench/side_by_side.sh
 source "$(dirname "$0")/side_by_side.sh"
 run_side_by_side compare_counter "$base" "$new" "bake/$filter/threads:$THREADS" "$work"
-python3 - "$work" "$ROUNDS" "$THREADS" "$counter" <<'PY'
-import json, sys
+python3 - "$work" "$ROUNDS" "$THREADS" "$counter" "$(dirname "$0")" <<'PY'
+import sys
 work, rounds, threads, counter = sys.argv[1], int(sys.argv[2]), sys.argv[3], sys.argv[4]
+sys.path.insert(0, sys.argv[5])
+from side_by_side import side_by_side_results
 values = {}
-for side in ("base", "new"):
-    for r in range(rounds):
-        for b in json.load(open(f"{work}/{side}.{r}.json"))["benchmarks"]:
-            if b.get("run_type") != "iteration" or counter not in b:
-                continue
-            name = b["run_name"].replace(f"/threads:{threads}", "").replace("/manual_time", "")
-            values.setdefault(name, {}).setdefault(side, []).append(b[counter] * 1e3)
+for side, name, b in side_by_side_results(work, rounds, threads):
+    if b.get("run_type") == "iteration" and counter in b:
+        values.setdefault(name, {}).setdefault(side, []).append(b[counter] * 1e3)
 if not values:
     sys.exit(f"compare_counter: no case reports {counter}")
 print(f"| case ({threads} thread{'s' if threads != '1' else ''}, min of {counter}) | base ms | new ms |")
