@@ -94,8 +94,8 @@ void NearestRotations(std::span<Eigen::Matrix3d> matrices) {
         const Eigen::Matrix3d& a = l < lanes ? matrices[first + l] : identity;
         for (int q = 0; q < 9; ++q) x[q][l] = a(q);
       }
-      // NearestRotation's start and its checks, lane by lane: its first step is
-      // Newton-Schulz only if e^2 < 1/4, and every other lane goes alone.
+      // NearestRotation's start and its checks, lane by lane; a lane that needs the SVD
+      // goes alone.
       double norm_squared[kLanes], determinant[kLanes], scale[kLanes];
       for (int l = 0; l < kLanes; ++l) {
         norm_squared[l] = 0;
@@ -106,23 +106,48 @@ void NearestRotations(std::span<Eigen::Matrix3d> matrices) {
         scale[l] = std::sqrt(3.0) / std::sqrt(norm_squared[l]);
         for (int q = 0; q < 9; ++q) x[q][l] *= scale[l];
       }
-      double g[6][kLanes];  // X^T X: 00, 11, 22, 01, 02, 12
-      double error_squared[kLanes];
-      Gram(x, g, error_squared);
       bool alone[kLanes];
       for (int l = 0; l < kLanes; ++l) {
         const double norm = std::sqrt(norm_squared[l]);
-        alone[l] = !(norm_squared[l] > 0) || !(determinant[l] > 1e-6 * norm * norm_squared[l]) ||
-                   !(error_squared[l] < 0.25);
+        alone[l] = !(norm_squared[l] > 0) || !(determinant[l] > 1e-6 * norm * norm_squared[l]);
         if (alone[l]) {
           for (int q = 0; q < 9; ++q) x[q][l] = identity(q);
         }
       }
+      double g[6][kLanes];  // X^T X: 00, 11, 22, 01, 02, 12
+      double error_squared[kLanes];
       for (int iteration = 0; iteration < 30; ++iteration) {
         Gram(x, g, error_squared);
         const double largest_error_squared =
             *std::max_element(error_squared, error_squared + kLanes);
         if (largest_error_squared < 1e-26) break;
+        // A lane still far from orthonormal (a tenth of a rigid every-level bake's matrices
+        // start there) takes NearestRotation's scaled Newton step instead of Newton-Schulz:
+        // X <- (zeta X + X^-T / zeta) / 2, X^-T the cofactors over the determinant.
+        const bool any_far = largest_error_squared >= 0.25;
+        double newton[9][kLanes];
+        if (any_far) {
+          for (int l = 0; l < kLanes; ++l) {
+            double cofactor[9];
+            for (int c = 0; c < 3; ++c) {
+              for (int r = 0; r < 3; ++r) {
+                const int r1 = (r + 1) % 3, r2 = (r + 2) % 3, c1 = (c + 1) % 3, c2 = (c + 2) % 3;
+                cofactor[3 * c + r] =
+                    x[3 * c1 + r1][l] * x[3 * c2 + r2][l] - x[3 * c2 + r1][l] * x[3 * c1 + r2][l];
+              }
+            }
+            const double det =
+                x[0][l] * cofactor[0] + x[1][l] * cofactor[1] + x[2][l] * cofactor[2];
+            double inverse_squared = 0, x_squared = 0;
+            for (int q = 0; q < 9; ++q) {
+              cofactor[q] /= det;
+              inverse_squared += cofactor[q] * cofactor[q];
+              x_squared += x[q][l] * x[q][l];
+            }
+            const double zeta = std::sqrt(std::sqrt(inverse_squared) / std::sqrt(x_squared));
+            for (int q = 0; q < 9; ++q) newton[q][l] = 0.5 * (zeta * x[q][l] + cofactor[q] / zeta);
+          }
+        }
         // X (3I - X^T X) / 2, as NearestRotation; the step is the identity's to rounding for
         // a lane that has converged.
         for (int l = 0; l < kLanes; ++l) {
@@ -134,6 +159,12 @@ void NearestRotations(std::span<Eigen::Matrix3d> matrices) {
             x[r][l] = x0 * s00 + x1 * s01 + x2 * s02;
             x[3 + r][l] = x0 * s01 + x1 * s11 + x2 * s12;
             x[6 + r][l] = x0 * s02 + x1 * s12 + x2 * s22;
+          }
+        }
+        if (any_far) {
+          for (int l = 0; l < kLanes; ++l) {
+            const bool far = error_squared[l] >= 0.25;
+            for (int q = 0; q < 9; ++q) x[q][l] = far ? newton[q][l] : x[q][l];
           }
         }
         if (largest_error_squared < 1e-13) break;

@@ -14,11 +14,12 @@ namespace motionlod::core {
 // (det(A) <= 0 or nearly singular A). Returns the identity for A = 0.
 Eigen::Matrix3d NearestRotation(const Eigen::Matrix3d& a);
 
-// NearestRotation of each matrix, in place, several at a time: the Newton-Schulz steps of
-// eight matrices interleave in one vectorised loop instead of waiting on each other's
-// latency (the rigid variants project m x T matrices per level). A matrix that needs
-// scaled Newton or the SVD takes NearestRotation's path alone. Agrees with
-// NearestRotation to rounding: a batch steps until all of its matrices have converged.
+// NearestRotation of each matrix, in place, several at a time: the steps of eight matrices
+// (scaled Newton where one is far from orthonormal, then Newton-Schulz) interleave in one
+// vectorised loop instead of waiting on each other's latency (the rigid variants project
+// m x T matrices per level). A matrix that needs the SVD takes NearestRotation's path
+// alone. Agrees with NearestRotation to rounding: a batch steps until all of its matrices
+// have converged.
 void NearestRotations(std::span<Eigen::Matrix3d> matrices);
 
 // The SVD path alone: R = U diag(1, 1, det(U V^T)) V^T. The reference for tests.

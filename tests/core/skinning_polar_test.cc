@@ -63,8 +63,9 @@ TEST(NearestRotation, NewtonMatchesSvdAndIsARotation) {
 }
 
 TEST(NearestRotation, BatchesAgreeWithOneAtATime) {
-  // Near-rotations (the common case), general matrices (scaled Newton first), reflections,
-  // zero and singular ones in one list whose length is not a multiple of the batch.
+  // Near-rotations (the common case), general and ill-conditioned matrices (scaled Newton
+  // first), reflections, zero and singular ones in one list whose length is not a multiple of the
+  // batch.
   std::mt19937 rng(11);
   std::normal_distribution<double> noise(0, 1);
   std::vector<Eigen::Matrix3d> matrices;
@@ -78,6 +79,9 @@ TEST(NearestRotation, BatchesAgreeWithOneAtATime) {
   matrices[7] = Eigen::Vector3d(1, 1, -1).asDiagonal();
   matrices[20] = Eigen::Matrix3d::Zero();
   matrices[33] = Eigen::Vector3d(1, 1, 0).asDiagonal();
+  // Ill-conditioned, yet not for the SVD: scaled Newton steps in one lane (Newton-Schulz
+  // alone would not converge within its steps) beside its batch's near-rotations.
+  matrices[12] = matrices[13] * Eigen::Vector3d(1, 1, 2e-5).asDiagonal();
   std::vector<Eigen::Matrix3d> batched = matrices;
   NearestRotations(batched);
   for (size_t q = 0; q < matrices.size(); ++q) {
