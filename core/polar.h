@@ -11,15 +11,15 @@ namespace motionlod::core {
 // For well-conditioned A with det(A) > 0: scaled Newton steps (Higham 1986) while far from
 // orthonormal, then inverse-free Newton-Schulz steps; both converge quadratically, and a
 // near-rotation needs two or three 3x3 products. SVD with a reflection guard otherwise
-// (det(A) <= 0 or nearly singular A). Returns the identity for A = 0.
+// (det(A) <= 0 or nearly singular A). Returns the identity for A = 0. One matrix through
+// NearestRotations.
 Eigen::Matrix3d NearestRotation(const Eigen::Matrix3d& a);
 
 // NearestRotation of each matrix, in place, several at a time: the steps of eight matrices
-// (scaled Newton where one is far from orthonormal, then Newton-Schulz) interleave in one
-// vectorised loop instead of waiting on each other's latency (the rigid variants project
-// m x T matrices per level). A matrix that needs the SVD takes NearestRotation's path
-// alone. Agrees with NearestRotation to rounding: a batch steps until all of its matrices
-// have converged.
+// interleave in one vectorised loop instead of waiting on each other's latency (the rigid
+// variants project m x T matrices per level); a matrix for the SVD goes alone. A matrix's
+// result does not depend on its batch beyond rounding: a batch steps until all of its
+// matrices have converged, and a converged matrix's further steps are the identity's.
 void NearestRotations(std::span<Eigen::Matrix3d> matrices);
 
 // The SVD path alone: R = U diag(1, 1, det(U V^T)) V^T. The reference for tests.

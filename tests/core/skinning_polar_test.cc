@@ -64,8 +64,8 @@ TEST(NearestRotation, NewtonMatchesSvdAndIsARotation) {
 
 TEST(NearestRotation, BatchesAgreeWithOneAtATime) {
   // Near-rotations (the common case), general and ill-conditioned matrices (scaled Newton
-  // first), reflections, zero and singular ones in one list whose length is not a multiple of the
-  // batch.
+  // first), reflections, zero and singular ones in one list whose length is not a multiple
+  // of the batch.
   std::mt19937 rng(11);
   std::normal_distribution<double> noise(0, 1);
   std::vector<Eigen::Matrix3d> matrices;
