@@ -1,11 +1,11 @@
 #include "core/character.h"
 
-#include <gtest/gtest.h>
-
 #include <algorithm>
 #include <cmath>
 #include <string>
 #include <vector>
+
+#include <gtest/gtest.h>
 
 #include "tests/core/fixtures.h"
 
