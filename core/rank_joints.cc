@@ -5,24 +5,84 @@
 #include <limits>
 #include <numeric>
 
-#include <Eigen/Geometry>
+#include <Eigen/Core>
+
+#include "base/simd.h"
+#include "core/chord_angle.h"
 
 namespace motionlod::core {
 namespace {
 
-Eigen::Quaterniond RotationOf(const Affine34d& local) {
-  // Local matrices may carry scale; the rotation is the orthonormal part of each axis.
-  Eigen::Matrix3d r = local.leftCols<3>();
-  for (int c = 0; c < 3; ++c) {
-    const double len = r.col(c).norm();
-    if (len > 0) r.col(c) /= len;
-  }
-  Eigen::Quaterniond q(r);
-  return q.normalized();
-}
+// Rows of LocalTransforms' output: the rotation's unit quaternion, then the translation.
+enum LocalRow { kW, kX, kY, kZ, kTx, kTy, kTz, kLocalRows };
 
-double Angle(const Eigen::Quaterniond& a, const Eigen::Quaterniond& b) {
-  return 2.0 * std::acos(std::min(1.0, std::abs(a.dot(b))));
+// A joint's local transforms L(t) = M_parent(t)^-1 M(t) (M(t) alone for the root), frame
+// by frame, into kLocalRows rows of `frames` (`rows`): their rotations as unit quaternions
+// and their translations. The rotation is that of the 3x3 part with its columns normalised
+// (local matrices may carry scale), converted as Eigen's Quaternion(Matrix3) converts it
+// (Shepperd's method: from w where the trace is positive, else from the largest diagonal
+// entry's axis), with selects instead of branches so that the frames' loop vectorises.
+// world[t * stride] is M(t), parent[t * stride] M_parent(t); both are invertible
+// (ValidateMotion).
+void LocalTransforms(const Affine34d* world, const Affine34d* parent, size_t stride, int frames,
+                     double* __restrict rows) {
+  for (int t = 0; t < frames; ++t) {
+    const double* m = world[t * stride].data();  // column-major: m[3c + r] = M(r, c)
+    double l[12];
+    if (parent == nullptr) {
+      for (int e = 0; e < 12; ++e) l[e] = m[e];
+    } else {
+      // M_parent^-1 = adj(A) / det(A), A its 3x3 part.
+      const double* a = parent[t * stride].data();
+      const double c00 = a[4] * a[8] - a[7] * a[5], c01 = a[6] * a[5] - a[3] * a[8];
+      const double c02 = a[3] * a[7] - a[6] * a[4], c10 = a[7] * a[2] - a[1] * a[8];
+      const double c11 = a[0] * a[8] - a[6] * a[2], c12 = a[6] * a[1] - a[0] * a[7];
+      const double c20 = a[1] * a[5] - a[4] * a[2], c21 = a[3] * a[2] - a[0] * a[5];
+      const double c22 = a[0] * a[4] - a[3] * a[1];
+      const double inverse_det = 1 / (a[0] * c00 + a[3] * c10 + a[6] * c20);
+      for (int c = 0; c < 4; ++c) {
+        // Column c of M, or for the translation M's minus the parent's.
+        const double b0 = c < 3 ? m[3 * c] : m[9] - a[9];
+        const double b1 = c < 3 ? m[3 * c + 1] : m[10] - a[10];
+        const double b2 = c < 3 ? m[3 * c + 2] : m[11] - a[11];
+        l[3 * c] = (c00 * b0 + c01 * b1 + c02 * b2) * inverse_det;
+        l[3 * c + 1] = (c10 * b0 + c11 * b1 + c12 * b2) * inverse_det;
+        l[3 * c + 2] = (c20 * b0 + c21 * b1 + c22 * b2) * inverse_det;
+      }
+    }
+    for (int c = 0; c < 3; ++c) {
+      const double length = std::sqrt(l[3 * c] * l[3 * c] + l[3 * c + 1] * l[3 * c + 1] +
+                                      l[3 * c + 2] * l[3 * c + 2]);
+      const double inverse_length = length > 0 ? 1 / length : 1.0;
+      for (int r = 0; r < 3; ++r) l[3 * c + r] *= inverse_length;
+    }
+    const double r00 = l[0], r10 = l[1], r20 = l[2], r01 = l[3], r11 = l[4], r21 = l[5];
+    const double r02 = l[6], r12 = l[7], r22 = l[8];
+    const bool from_w = r00 + r11 + r22 > 0;
+    const bool from_y = !from_w && r11 > r00 && !(r22 > r11);
+    const bool from_z = !from_w && r22 > std::max(r00, r11);
+    const bool from_x = !from_w && !from_y && !from_z;
+    const double d = from_w   ? r00 + r11 + r22 + 1
+                     : from_x ? r00 - r11 - r22 + 1
+                     : from_y ? r11 - r22 - r00 + 1
+                              : r22 - r00 - r11 + 1;
+    const double root = std::sqrt(d);
+    const double half = 0.5 * root, f = 0.5 / root;
+    const double a = (r21 - r12) * f, b = (r02 - r20) * f, c = (r10 - r01) * f;
+    const double xy = (r10 + r01) * f, xz = (r20 + r02) * f, yz = (r21 + r12) * f;
+    const double w = from_w ? half : from_x ? a : from_y ? b : c;
+    const double x = from_w ? a : from_x ? half : from_y ? xy : xz;
+    const double y = from_w ? b : from_x ? xy : from_y ? half : yz;
+    const double z = from_w ? c : from_x ? xz : from_y ? yz : half;
+    const double inverse_norm = 1 / std::sqrt(w * w + x * x + y * y + z * z);
+    rows[kW * frames + t] = w * inverse_norm;
+    rows[kX * frames + t] = x * inverse_norm;
+    rows[kY * frames + t] = y * inverse_norm;
+    rows[kZ * frames + t] = z * inverse_norm;
+    rows[kTx * frames + t] = l[9];
+    rows[kTy * frames + t] = l[10];
+    rows[kTz * frames + t] = l[11];
+  }
 }
 
 }  // namespace
@@ -52,38 +112,64 @@ StatusOr<JointRanking> RankJointsJob::Run(const PieceRunner& run) const {
   ranking.rotational.assign(n, 0.0);
   ranking.priority.assign(n, 0.0);
 
+  // Rotation angles are those between unit quaternions doubled, from their chords
+  // (core/chord_angle.h): 2 * 2 asin(|q - m| / 2), with m's sign the one nearer to q. The
+  // frames' loops run in the widest vectors this CPU has, a few joints per piece.
   constexpr int kJointsPerPiece = 4;
   RunPieces(run, (n + kJointsPerPiece - 1) / kJointsPerPiece, [&](int piece) {
-    std::vector<Eigen::Quaterniond> rotations(frames);
-    std::vector<Vec3d> translations(frames);
-    for (int j = piece * kJointsPerPiece; j < std::min(n, (piece + 1) * kJointsPerPiece); ++j) {
-      const int parent = s.parents[j];
-      const Affine34d bind_local =
-          parent < 0 ? s.bind_world[j] : ComposeAffine(InverseAffine(s.bind_world[parent]), s.bind_world[j]);
-      const Eigen::Quaterniond bind_rotation = RotationOf(bind_local);
-      Eigen::Vector4d sum = Eigen::Vector4d::Zero();
-      for (int t = 0; t < frames; ++t) {
-        const Affine34d local = parent < 0 ? motion->world(t, j)
-                                           : ComposeAffine(InverseAffine(motion->world(t, parent)),
-                                                           motion->world(t, j));
-        rotations[t] = RotationOf(local);
-        translations[t] = local.col(3);
-        // Align signs with the bind rotation so q and -q average together.
-        if (rotations[t].dot(bind_rotation) < 0) rotations[t].coeffs() *= -1.0;
-        sum += rotations[t].coeffs();
+    RunWithWidestSimd([&] {
+      std::vector<double> local(static_cast<size_t>(kLocalRows) * frames);
+      std::vector<double> to_mean(frames), to_bind(frames), moved(frames);
+      double* q[4] = {local.data() + kW * frames, local.data() + kX * frames,
+                      local.data() + kY * frames, local.data() + kZ * frames};
+      for (int j = piece * kJointsPerPiece; j < std::min(n, (piece + 1) * kJointsPerPiece); ++j) {
+        const int parent = s.parents[j];
+        double bind[kLocalRows];
+        LocalTransforms(&s.bind_world[j], parent < 0 ? nullptr : &s.bind_world[parent], 0, 1, bind);
+        LocalTransforms(&motion->joint_world[j],
+                        parent < 0 ? nullptr : &motion->joint_world[parent], n, frames,
+                        local.data());
+        // Signs aligned with the bind rotation, so that q and -q average together.
+        for (int t = 0; t < frames; ++t) {
+          const double dot =
+              q[0][t] * bind[kW] + q[1][t] * bind[kX] + q[2][t] * bind[kY] + q[3][t] * bind[kZ];
+          const double sign = dot < 0 ? -1.0 : 1.0;
+          for (double* row : q) row[t] *= sign;
+        }
+        Eigen::Vector4d sum = Eigen::Vector4d::Zero();
+        for (int t = 0; t < frames; ++t) {
+          for (int a = 0; a < 4; ++a) sum[a] += q[a][t];
+        }
+        Eigen::Vector4d mean(bind[kW], bind[kX], bind[kY], bind[kZ]);
+        if (sum.norm() > 0) mean = sum.normalized();
+        for (int t = 0; t < frames; ++t) {
+          const double dot =
+              q[0][t] * mean[0] + q[1][t] * mean[1] + q[2][t] * mean[2] + q[3][t] * mean[3];
+          const double sign = dot < 0 ? -1.0 : 1.0;
+          double chord_mean = 0, chord_bind = 0;
+          for (int a = 0; a < 4; ++a) {
+            const double to_m = q[a][t] - sign * mean[a], to_b = q[a][t] - bind[a];
+            chord_mean += to_m * to_m;
+            chord_bind += to_b * to_b;
+          }
+          to_mean[t] = ChordAngleOrMarker(0.5 * std::sqrt(chord_mean));
+          to_bind[t] = ChordAngleOrMarker(0.5 * std::sqrt(chord_bind));
+          const double dx = local[kTx * frames + t] - bind[kTx];
+          const double dy = local[kTy * frames + t] - bind[kTy];
+          const double dz = local[kTz * frames + t] - bind[kTz];
+          moved[t] = std::sqrt(dx * dx + dy * dy + dz * dz);
+        }
+        const double translation_scale = std::max(ranking.hierarchical[j], 0.01 * c.height());
+        double variation = 0, offset = 0, translation = 0;
+        for (int t = 0; t < frames; ++t) {
+          variation += 2 * FinishChordAngle(to_mean[t]);
+          offset += 2 * FinishChordAngle(to_bind[t]);
+          translation += moved[t] / translation_scale;
+        }
+        ranking.rotational[j] = (variation + offset + translation) / frames;
+        ranking.priority[j] = ranking.hierarchical[j] * ranking.rotational[j];
       }
-      Eigen::Quaterniond mean(bind_rotation);
-      if (sum.norm() > 0) mean.coeffs() = sum.normalized();
-      const double translation_scale = std::max(ranking.hierarchical[j], 0.01 * c.height());
-      double variation = 0, offset = 0, translation = 0;
-      for (int t = 0; t < frames; ++t) {
-        variation += Angle(rotations[t], mean);
-        offset += Angle(rotations[t], bind_rotation);
-        translation += (translations[t] - bind_local.col(3)).norm() / translation_scale;
-      }
-      ranking.rotational[j] = (variation + offset + translation) / frames;
-      ranking.priority[j] = ranking.hierarchical[j] * ranking.rotational[j];
-    }
+    });
   });
 
   std::vector<int> depth(n, 0);

@@ -10,6 +10,7 @@
 #include "base/hash.h"
 #include "base/simd.h"
 #include "core/block_cholesky.h"
+#include "core/chord_angle.h"
 #include "core/polar.h"
 
 namespace motionlod::core {
@@ -292,12 +293,11 @@ std::vector<int> EvenlySpaced(int count, int available) {
 }
 
 // The angle between each original normal n and n + dn (radians) from the chord of their
-// directions, 2 asin(|u - w/|w|| / 2) with u = n/|n|, w = u + dn/|n|: exact to rounding at
-// every angle, where acos of the cosine keeps only half the digits of a small one. Up to
-// 29 degrees, where level errors almost always are, a series replaces asin (its first
-// omitted term is below 3e-12 of the result); past it the angle is left as -x for the
-// caller's asin, and NaN where n or n + dn is zero. Without a branch or a call the loop
-// runs two vertices per instruction. normals: rows of count, u_x, u_y, u_z and 1/|n|.
+// directions, 2 asin(|u - w/|w|| / 2) with u = n/|n|, w = u + dn/|n| (core/chord_angle.h):
+// up to 29 degrees, where level errors almost always are, by the series; past it the
+// marker for FinishChordAngle, and NaN where n or n + dn is zero. Without a branch or a
+// call the loop runs two vertices per instruction. normals: rows of count, u_x, u_y, u_z
+// and 1/|n|.
 void ChordAngles(size_t count, const double* normals, const double* dn_x, const double* dn_y,
                  const double* dn_z, double* __restrict angle) {
   const double* unit_x = normals;
@@ -311,15 +311,7 @@ void ChordAngles(size_t count, const double* normals, const double* dn_x, const 
     const double inverse_w = 1 / std::sqrt(wx * wx + wy * wy + wz * wz);
     const double cx = unit_x[v] - wx * inverse_w, cy = unit_y[v] - wy * inverse_w;
     const double cz = unit_z[v] - wz * inverse_w;
-    const double x = 0.5 * std::sqrt(cx * cx + cy * cy + cz * cz);
-    const double x2 = x * x, x4 = x2 * x2, x8 = x4 * x4;
-    // asin x = sum_k (2k)! / (4^k (k!)^2 (2k+1)) x^(2k+1), k = 0..7, in Estrin's order:
-    // three dependent multiply-adds instead of Horner's eight, which made this loop wait
-    // on its own latency.
-    const double series =
-        2 * x * ((1 + x2 * (1.0 / 6)) + x4 * (3.0 / 40 + x2 * (5.0 / 112)) +
-                 x8 * ((35.0 / 1152 + x2 * (63.0 / 2816)) + x4 * (231.0 / 13312 + x2 * (143.0 / 10240))));
-    angle[v] = x <= 0.25 ? series : -x;
+    angle[v] = ChordAngleOrMarker(0.5 * std::sqrt(cx * cx + cy * cy + cz * cz));
   }
 }
 
@@ -1059,9 +1051,8 @@ void PreparedMotion::Impl::SampleFrameValues(const Eigen::Matrix<double, Eigen::
     ChordAngles(count, normals, scratch.normal_x.data(), scratch.normal_y.data(),
                 scratch.normal_z.data(), scratch.angle.data());
     for (size_t e = 0; e < count; ++e) {
-      double angle = scratch.angle[e];
-      // Past the series, or no direction to compare (n or n + dn zero: no angle).
-      if (!(angle >= 0)) angle = std::isnan(angle) ? 0.0 : 2 * std::asin(std::min(-angle, 1.0));
+      // No direction to compare (n or n + dn zero): no angle.
+      const double angle = std::isnan(scratch.angle[e]) ? 0.0 : FinishChordAngle(scratch.angle[e]);
       values.angle[vertices ? (*vertices)[e] : e] = angle;
     }
   });
