@@ -1,6 +1,7 @@
 #include "io/clips.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <map>
@@ -35,17 +36,34 @@ inline Eigen::Quaterniond Blend(const Eigen::Quaterniond& a, const Eigen::Quater
   return a.slerp(alpha, b).normalized();  // Eigen's slerp takes the shorter arc
 }
 
+// Blend weights this close to 0 or 1 are a sample on a key, off only by the rounding of
+// the key times (DeriveSourceRate puts the keys of a clip sampled at its own rate on the
+// frames): the key itself, which the blend would give to within 1e-9 of the step between
+// the keys, without slerp's acos and three sines.
+constexpr double kOnKey = 1e-9;
+
 // The keyed value at time t: the first or last key outside the keys, else the two
-// surrounding keys blended (lerp for vectors, slerp for rotations).
+// surrounding keys blended (lerp for vectors, slerp for rotations). `cursor` is the index
+// of the key before the previous call's time: sampling walks a clip forward, a key or
+// less per frame, so the next span is found from it without a search.
 template <typename T>
-T Interpolate(const std::vector<double>& times, const std::vector<T>& values, double t) {
+T Interpolate(const std::vector<double>& times, const std::vector<T>& values, double t,
+              size_t& cursor) {
   if (t <= times.front()) return values.front();
   if (t >= times.back()) return values.back();
-  const size_t hi =
-      static_cast<size_t>(std::upper_bound(times.begin(), times.end(), t) - times.begin());
-  const size_t lo = hi - 1;
-  const double span = times[hi] - times[lo];
-  return Blend(values[lo], values[hi], span > 0 ? (t - times[lo]) / span : 0.0);
+  size_t lo = cursor;
+  if (!(lo + 1 < times.size() && times[lo] <= t)) lo = 0;
+  for (int step = 0; step < 2 && times[lo + 1] <= t; ++step) ++lo;
+  if (times[lo + 1] <= t) {
+    const auto after = std::upper_bound(times.begin() + lo, times.end(), t);
+    lo = static_cast<size_t>(after - times.begin()) - 1;
+  }
+  cursor = lo;
+  const double span = times[lo + 1] - times[lo];
+  const double alpha = span > 0 ? (t - times[lo]) / span : 0.0;
+  if (alpha <= kOnKey) return values[lo];
+  if (alpha >= 1 - kOnKey) return values[lo + 1];
+  return Blend(values[lo], values[lo + 1], alpha);
 }
 
 // Sorts keys by time (stable) when a file lists them out of order.
@@ -311,6 +329,7 @@ void PoseSampler::Evaluate(const Clip* clip, double seconds, core::Affine34d* jo
     if (clip != nullptr) {
       for (size_t t = 0; t < clip->tracks.size(); ++t)
         track_of_node_[clip->tracks[t].node] = static_cast<int>(t);
+      key_cursors_.assign(clip->tracks.size(), {0, 0, 0});
     }
     bound_clip_ = clip;
   }
@@ -322,15 +341,19 @@ void PoseSampler::Evaluate(const Clip* clip, double seconds, core::Affine34d* jo
       local = node.local;
     } else {
       const Track& track = clip->tracks[t];
+      std::array<size_t, 3>& cursor = key_cursors_[t];
       const Eigen::Vector3d translation =
-          track.positions.empty() ? node.translation
-                                  : Interpolate(track.position_times, track.positions, seconds);
+          track.positions.empty()
+              ? node.translation
+              : Interpolate(track.position_times, track.positions, seconds, cursor[0]);
       const Eigen::Quaterniond rotation =
-          track.rotations.empty() ? node.rotation
-                                  : Interpolate(track.rotation_times, track.rotations, seconds);
-      const Eigen::Vector3d scale = track.scalings.empty()
-                                        ? node.scale
-                                        : Interpolate(track.scaling_times, track.scalings, seconds);
+          track.rotations.empty()
+              ? node.rotation
+              : Interpolate(track.rotation_times, track.rotations, seconds, cursor[1]);
+      const Eigen::Vector3d scale =
+          track.scalings.empty()
+              ? node.scale
+              : Interpolate(track.scaling_times, track.scalings, seconds, cursor[2]);
       local = ComposeTrs(translation, rotation, scale);
     }
     world_[k] = node.parent >= 0 ? core::ComposeAffine(world_[node.parent], local) : local;

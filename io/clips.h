@@ -3,6 +3,7 @@
 #pragma once
 
 #include <Eigen/Geometry>
+#include <array>
 #include <string>
 #include <vector>
 
@@ -62,6 +63,9 @@ class PoseSampler {
   std::vector<int> needed_;  // joint nodes and their ancestors, ascending (preorder)
   std::vector<core::Affine34d> world_;
   std::vector<int> track_of_node_;
+  // Per track of the bound clip, the key spans last used (position, rotation, scale):
+  // where Interpolate looks first.
+  std::vector<std::array<size_t, 3>> key_cursors_;
   const Clip* bound_clip_ = nullptr;
 };
 

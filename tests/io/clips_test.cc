@@ -154,6 +154,70 @@ TEST(PoseSampler, MissingChannelsKeepTheRestValues) {
   EXPECT_TRUE(world.isApprox(scene.nodes[0].local, 1e-12));
 }
 
+// A clip of `keys` rotation and position keys at uneven times (ticks = seconds).
+SceneAnimation UnevenKeys(int keys) {
+  SceneAnimation a;
+  a.name = "uneven";
+  a.ticks_per_second = 1;
+  SceneChannel c = Channel("n");
+  double time = 0;
+  for (int k = 0; k < keys; ++k) {
+    c.rotation_times.push_back(time);
+    c.rotations.push_back(
+        Quaterniond(Eigen::AngleAxisd(0.3 * k, Vector3d(1, k % 3, 2).normalized())));
+    c.position_times.push_back(time);
+    c.positions.push_back(Vector3d(k, k * k, -k));
+    time += 0.05 + 0.04 * (k % 4);
+  }
+  a.duration_ticks = c.rotation_times.back();
+  a.channels.push_back(c);
+  return a;
+}
+
+TEST(PoseSampler, AnyOrderOfTimesGivesTheSameMatrices) {
+  // The sampler looks for each time's keys from the last ones it used: walking forward,
+  // back, repeating a time or jumping must all find the same keys as a fresh sampler.
+  const Scene scene = OneNodeScene(UnevenKeys(40));
+  std::vector<std::string> warnings;
+  const auto clips = BuildClips(scene, {1}, warnings);
+  ASSERT_TRUE(clips.ok());
+  const Clip& clip = clips->front();
+  std::vector<double> times;
+  for (int t = -2; t <= 300; ++t) times.push_back(t / 80.0);
+  for (int t = 300; t >= 0; t -= 7) times.push_back(t / 80.0 + 1e-3);
+  for (int t : {150, 3, 299, 3, 3, 200}) times.push_back(t / 80.0);
+  PoseSampler walking(scene.nodes, {0});
+  for (double seconds : times) {
+    PoseSampler fresh(scene.nodes, {0});
+    core::Affine34d walked, expected;
+    walking.Evaluate(&clip, seconds, &walked);
+    fresh.Evaluate(&clip, seconds, &expected);
+    ASSERT_EQ(walked, expected) << "at " << seconds << " s";
+  }
+}
+
+TEST(PoseSampler, ATimeWithinRoundingOfAKeyIsThatKey) {
+  // Key times carry the rounding of the file's float ticks: a frame that lands a hair
+  // off a key gets the key itself.
+  const Scene scene = OneNodeScene(UnevenKeys(3));
+  std::vector<std::string> warnings;
+  const auto clips = BuildClips(scene, {1}, warnings);
+  ASSERT_TRUE(clips.ok());
+  const Track& track = clips->front().tracks.front();
+  const Eigen::Matrix3d key = track.rotations[1].toRotationMatrix();
+  PoseSampler sampler(scene.nodes, {0});
+  core::Affine34d world;
+  for (double offset : {-1e-12, 0.0, 1e-12}) {
+    sampler.Evaluate(&clips->front(), track.rotation_times[1] + offset, &world);
+    EXPECT_EQ(world.leftCols<3>(), key) << offset;
+    EXPECT_EQ(world.col(3), track.positions[1]) << offset;
+  }
+  // Further off, the keys are blended.
+  sampler.Evaluate(&clips->front(), track.rotation_times[1] + 1e-6, &world);
+  EXPECT_GT((world.leftCols<3>() - key).norm(), 1e-8);
+  EXPECT_LT((world.leftCols<3>() - key).norm(), 1e-5);
+}
+
 TEST(BuildClips, MergesUnnamedSingleChannelAnimationsOfEqualLength) {
   Scene scene;
   for (const char* name : {"a", "b", "c"}) {
