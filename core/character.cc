@@ -323,6 +323,38 @@ StatusOr<std::shared_ptr<const Character>> BuildCharacter(RawCharacter raw, cons
       }
       c->group_cluster_offsets_.push_back(static_cast<uint32_t>(c->cluster_centers_.size()));
     }
+    // The clusters' lane blocks (cluster_lanes).
+    {
+      const size_t clusters = c->cluster_centers_.size();
+      c->cluster_lane_offsets_.resize(clusters + 1);
+      c->cluster_lane_offsets_[0] = 0;
+      for (size_t q = 0; q < clusters; ++q) {
+        const uint32_t count = c->cluster_vertex_offsets_[q + 1] - c->cluster_vertex_offsets_[q];
+        const uint32_t rows =
+            3 + c->cluster_influence_offsets_[q + 1] - c->cluster_influence_offsets_[q];
+        c->cluster_lane_offsets_[q + 1] =
+            c->cluster_lane_offsets_[q] + rows * Character::ClusterLaneRow(count);
+      }
+      c->cluster_lanes_.assign(c->cluster_lane_offsets_.back(), 0.0f);
+      std::vector<int32_t> row_of_joint(n, -1);
+      for (size_t q = 0; q < clusters; ++q) {
+        const uint32_t first = c->cluster_vertex_offsets_[q];
+        const uint32_t count = c->cluster_vertex_offsets_[q + 1] - first;
+        const uint32_t padded = Character::ClusterLaneRow(count);
+        const uint32_t influences = c->cluster_influence_offsets_[q];
+        for (uint32_t g = influences; g < c->cluster_influence_offsets_[q + 1]; ++g) {
+          row_of_joint[c->cluster_influences_[g].joint] = static_cast<int32_t>(3 + g - influences);
+        }
+        float* block = c->cluster_lanes_.data() + c->cluster_lane_offsets_[q];
+        for (uint32_t v = 0; v < count; ++v) {
+          const uint32_t i = c->cluster_vertices_[first + v];
+          for (int a = 0; a < 3; ++a) block[a * padded + v] = k.positions[i][a];
+          for (uint32_t e = k.influence_offsets[i]; e < k.influence_offsets[i + 1]; ++e) {
+            block[row_of_joint[k.influence_joints[e]] * padded + v] = k.influence_weights[e];
+          }
+        }
+      }
+    }
 
     // h_j = l_j: summed distance from joint j to each leaf of its subtree. A childless
     // joint that dominates some vertices ends at a virtual end site, its farthest such

@@ -101,6 +101,19 @@ class Character {
   const std::vector<InfluenceRange>& group_influences() const { return group_influences_; }
   const std::vector<uint32_t>& cluster_influence_offsets() const { return cluster_influence_offsets_; }
   const std::vector<InfluenceRange>& cluster_influences() const { return cluster_influences_; }
+  // Each cluster's skin again, laid out to blend kClusterLanes vertices at once: cluster
+  // c's block starts at cluster_lane_offsets()[c] in cluster_lanes() and has rows of P
+  // floats, P its vertex count rounded up to a multiple of kClusterLanes: the bind
+  // positions' x, y and z, then the weight its cluster_influences()' joints give each
+  // vertex, in that order (0 where one gives none). Vertices in cluster_vertices() order;
+  // the padding sits at the origin with no weight.
+  static constexpr int kClusterLanes = 8;
+  // P for a cluster of `count` vertices.
+  static constexpr uint32_t ClusterLaneRow(uint32_t count) {
+    return (count + kClusterLanes - 1) / kClusterLanes * kClusterLanes;
+  }
+  const std::vector<uint32_t>& cluster_lane_offsets() const { return cluster_lane_offsets_; }
+  const std::vector<float>& cluster_lanes() const { return cluster_lanes_; }
   // Direct children of each joint.
   const std::vector<std::vector<int>>& children() const { return children_; }
   int FindJoint(const std::string& name) const;  // -1 when absent
@@ -141,6 +154,8 @@ class Character {
   std::vector<InfluenceRange> group_influences_;
   std::vector<uint32_t> cluster_influence_offsets_;
   std::vector<InfluenceRange> cluster_influences_;
+  std::vector<uint32_t> cluster_lane_offsets_;
+  std::vector<float> cluster_lanes_;
   std::vector<std::vector<int>> children_;
   std::vector<JointPairMoment> joint_pair_moments_;
 };

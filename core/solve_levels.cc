@@ -792,6 +792,57 @@ void WeightedBound(const Character::InfluenceRange* begin, const Character::Infl
   }
 }
 
+constexpr int kVertexLanes = Character::kClusterLanes;
+
+// |d_i|^2, d_i = sum_g w_ig Delta_g [v0_i; 1], of kVertexLanes vertices of a cluster in one
+// frame, from its lane block (Character::cluster_lanes: rows of `padded` floats, read from
+// the chunk's column on) and Delta_g of its influences' joints g (delta[g * delta_stride]).
+// Plain loops over the lanes, so that the AVX2 version (base/simd.h) keeps each blended
+// entry of the 8 vertices in one 256-bit register: a vertex at a time, the blends ran
+// 128 bits wide through each vertex's own influence list, with a horizontal sum at the end.
+inline float ChunkSquaredErrors(const float* rows, uint32_t padded,
+                                const Character::InfluenceRange* influences,
+                                uint32_t influence_count, const PaddedDelta* delta,
+                                int delta_stride, float* squared) {
+  // Unrolled, so that the blend's 12 vectors are registers and not an array in memory.
+  float blended[12][kVertexLanes];  // entry 3a + i: the blended Delta(i, a)
+  {
+    const float* weight = rows + 3 * padded;
+    const float* entries = delta[static_cast<size_t>(influences[0].joint) * delta_stride].data();
+#pragma GCC unroll 12
+    for (int e = 0; e < 12; ++e) {
+      const float entry = entries[4 * (e / 3) + e % 3];
+      for (int v = 0; v < kVertexLanes; ++v) blended[e][v] = weight[v] * entry;
+    }
+  }
+  for (uint32_t g = 1; g < influence_count; ++g) {
+    const float* weight = rows + (3 + g) * padded;
+    const float* entries = delta[static_cast<size_t>(influences[g].joint) * delta_stride].data();
+#pragma GCC unroll 12
+    for (int e = 0; e < 12; ++e) {
+      const float entry = entries[4 * (e / 3) + e % 3];
+      for (int v = 0; v < kVertexLanes; ++v) blended[e][v] += weight[v] * entry;
+    }
+  }
+  float largest[kVertexLanes];
+  for (int v = 0; v < kVertexLanes; ++v) {
+    const float x = rows[v], y = rows[padded + v], z = rows[2 * padded + v];
+    float length_squared = 0;
+#pragma GCC unroll 3
+    for (int i = 0; i < 3; ++i) {
+      const float moved =
+          blended[i][v] * x + blended[3 + i][v] * y + blended[6 + i][v] * z + blended[9 + i][v];
+      length_squared += moved * moved;
+    }
+    squared[v] = length_squared;
+    largest[v] = length_squared;
+  }
+  for (int width = kVertexLanes / 2; width > 0; width /= 2) {
+    for (int v = 0; v < width; ++v) largest[v] = std::max(largest[v], largest[v + width]);
+  }
+  return largest[0];
+}
+
 }  // namespace
 
 PreparedMotion::Impl::MaxSearchBounds PreparedMotion::Impl::MakeMaxSearchBounds(
@@ -882,7 +933,6 @@ PreparedMotion::Impl::MaxSearchStart PreparedMotion::Impl::MaxVertexError(
     // (most glTF and FBX files) from visiting every vertex of every frame.
     constexpr double kNegligible = 1e-6;
     const Character& c = *character;
-    const RawSkin& skin = c.skin();
     const auto& group_clusters = c.group_cluster_offsets();
     const auto& group_influence_offsets = c.group_influence_offsets();
     const auto& group_influences = c.group_influences();
@@ -973,29 +1023,30 @@ PreparedMotion::Impl::MaxSearchStart PreparedMotion::Impl::MaxVertexError(
             weighted_box_bounds(cluster_influences, cluster_influence_offsets, cluster,
                                 c.cluster_centers()[cluster], c.cluster_half_extents()[cluster],
                                 cluster_bound);
+            const uint32_t first_vertex = cluster_vertex_offsets[cluster];
+            const uint32_t padded =
+                Character::ClusterLaneRow(cluster_vertex_offsets[cluster + 1] - first_vertex);
+            const float* block = c.cluster_lanes().data() + c.cluster_lane_offsets()[cluster];
             for (int f = 0; f < kLanes; ++f) {
               if (!open[f] || cluster_bound[f] <= std::max(best, floor)) continue;
-              const PaddedDelta* frame_delta = frame_delta_f.data() + f;
-              for (uint32_t e = cluster_vertex_offsets[cluster];
-                   e < cluster_vertex_offsets[cluster + 1]; ++e) {
-                const uint32_t i = cluster_vertices[e];
-                PaddedDelta blended = PaddedDelta::Zero();
-                for (uint32_t g = skin.influence_offsets[i]; g < skin.influence_offsets[i + 1];
-                     ++g) {
-                  blended.noalias() +=
-                      skin.influence_weights[g] *
-                      frame_delta[static_cast<size_t>(skin.influence_joints[g]) * kLanes];
-                }
+              for (uint32_t chunk = 0; chunk < padded; chunk += kVertexLanes) {
+                float squared[kVertexLanes];
+                const float largest = ChunkSquaredErrors(
+                    block + chunk, padded,
+                    cluster_influences.data() + cluster_influence_offsets[cluster],
+                    cluster_influence_offsets[cluster + 1] - cluster_influence_offsets[cluster],
+                    frame_delta_f.data() + f, kLanes, squared);
+                if (!(largest > best_squared)) continue;
                 // Compared squared (sqrt is monotonic): the square root, its conversion and a
                 // compare with `best` in memory were a fifth of the search's time per vertex.
-                const float length_squared =
-                    (blended.leftCols<3>() * skin.positions[i] + blended.col(3)).squaredNorm();
-                if (length_squared > best_squared) {
-                  best_squared = length_squared;
-                  best = std::sqrt(static_cast<double>(length_squared));
-                  best_frame = lane_frame[f];
-                  best_vertex = static_cast<int>(i);
-                  if (best > decide_within) return;
+                for (int v = 0; v < kVertexLanes; ++v) {
+                  if (squared[v] > best_squared) {
+                    best_squared = squared[v];
+                    best = std::sqrt(static_cast<double>(squared[v]));
+                    best_frame = lane_frame[f];
+                    best_vertex = static_cast<int>(cluster_vertices[first_vertex + chunk + v]);
+                    if (best > decide_within) return;
+                  }
                 }
               }
             }

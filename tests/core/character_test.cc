@@ -121,9 +121,35 @@ TEST(BuildCharacter, ClustersPartitionTheSkinAndBoundTheirVerticesAndWeights) {
       }
       EXPECT_EQ(listed_max, largest) << "cluster " << cluster;
       EXPECT_EQ(listed_min, expected_min) << "cluster " << cluster;
+      // Its lane block: positions, then one row of weights per listed joint, padded.
+      const uint32_t padded = Character::ClusterLaneRow(size);
+      EXPECT_EQ(padded % Character::kClusterLanes, 0u);
+      EXPECT_LT(padded - size, static_cast<uint32_t>(Character::kClusterLanes));
+      const uint32_t listed =
+          c.cluster_influence_offsets()[cluster + 1] - c.cluster_influence_offsets()[cluster];
+      ASSERT_EQ(c.cluster_lane_offsets()[cluster + 1] - c.cluster_lane_offsets()[cluster],
+                (3 + listed) * padded);
+      const float* block = c.cluster_lanes().data() + c.cluster_lane_offsets()[cluster];
+      for (uint32_t v = 0; v < padded; ++v) {
+        const bool real = v < size;
+        const uint32_t i = real ? c.cluster_vertices()[vertex_offsets[cluster] + v] : 0;
+        for (int a = 0; a < 3; ++a)
+          EXPECT_EQ(block[a * padded + v], real ? skin.positions[i][a] : 0.0f);
+        for (uint32_t q = 0; q < listed; ++q) {
+          const int joint =
+              c.cluster_influences()[c.cluster_influence_offsets()[cluster] + q].joint;
+          float weight = 0;
+          for (uint32_t g = skin.influence_offsets[i]; real && g < skin.influence_offsets[i + 1];
+               ++g) {
+            if (skin.influence_joints[g] == joint) weight = skin.influence_weights[g];
+          }
+          EXPECT_EQ(block[(3 + q) * padded + v], weight) << "cluster " << cluster << " lane " << v;
+        }
+      }
     }
   }
   for (int i = 0; i < c.vertex_count(); ++i) EXPECT_EQ(seen[i], 1) << "vertex " << i;
+  EXPECT_EQ(c.cluster_lanes().size(), c.cluster_lane_offsets().back());
 }
 
 // One joint weighting every vertex of `positions`, which need no triangles.
