@@ -1216,7 +1216,8 @@ StatusOr<LevelSystem> SolveSystem(const PreparedMotion::Impl& d, const ReducedSk
 
   if (m == n) {
     // Nothing removed: the original matrices leave no residual and are what the
-    // regulariser pulls towards, so they are the exact minimiser.
+    // regulariser pulls towards, so they are the exact minimiser (SolveVariant skips the
+    // system altogether where the level needs nothing else).
     system.x = d.kt;
     return system;
   }
@@ -1243,8 +1244,11 @@ namespace {
 // and with re-solved translations for the rigid variants (4m x 3T, as LevelSystem::x), and
 // the view of its Delta_k = K'_phi(k) - K_k for the errors.
 struct VariantSolution {
-  MatrixXd x;
-  bool unchanged = false;  // x is the original matrices (nothing removed, nothing projected)
+  MatrixXd x;  // empty where unchanged
+  // The solution is the original matrices: nothing removed, nothing projected.
+  bool unchanged = false;
+
+  const MatrixXd& Matrices(const PreparedMotion::Impl& d) const { return unchanged ? d.kt : x; }
 
   // Reads x, so it lives as long as this.
   PreparedMotion::Impl::DeltaView Delta(const PreparedMotion::Impl& d, const ReducedSkeleton& level) const {
@@ -1256,23 +1260,26 @@ struct VariantSolution {
 
 StatusOr<VariantSolution> SolveVariant(const PreparedMotion::Impl& d, const ReducedSkeleton& level) {
   return RunWithWidestSimd([&]() -> StatusOr<VariantSolution> {
-    auto system = SolveSystem(d, level);
-    if (!system.ok()) return system.status();
+    if (Status status = ValidateLevel(level, d.n); !status.ok()) return status;
     const int n = d.n;
     const int m = level.kept_count();
+    // With every joint kept, the original matrices are the least-squares solution
+    // (SolveSystem), and original matrices that are rotations already (to within their
+    // source's float precision) are the constrained minimiser too (no residual): they are
+    // the level as they are, without the system (the right-hand sides alone are 3T x 4n),
+    // and the rigid variants keep them bit for bit, as the fitted ones do, instead of
+    // projecting them by a few 1e-6, re-solving them and measuring an error of 1e-13.
+    if (m == n && (!IsRigid(d.settings.variant) || AllRotations(d.kt))) {
+      return VariantSolution{MatrixXd(), true};
+    }
+    auto system = SolveSystem(d, level);
+    if (!system.ok()) return system.status();
     const int cols = 3 * d.frames;
     const BlockSymmetric<4>& g = system->g;
     const MatrixXd& bt = system->bt;
     MatrixXd& x = system->x;
 
-    // With every joint kept, original matrices that are rotations already (to within their
-    // source's float precision) are the constrained minimiser too (no residual): keep them
-    // bit for bit, as the fitted variants do, instead of projecting them by a few 1e-6,
-    // re-solving them and measuring an error of 1e-13.
-    const bool projected = IsRigid(d.settings.variant) && !(m == n && AllRotations(x));
-    // The full level's solution is the original matrices themselves (SolveSystem).
-    const bool unchanged = m == n && !projected;
-    if (projected) {
+    if (IsRigid(d.settings.variant)) {
       // x holds each K'^T: the polar factor of a transpose is the transpose of the factor.
       std::vector<Eigen::Matrix3d> rotations(static_cast<size_t>(d.frames) * m);
       for (int t = 0; t < d.frames; ++t) {
@@ -1328,7 +1335,7 @@ StatusOr<VariantSolution> SolveVariant(const PreparedMotion::Impl& d, const Redu
         }
       }
     }
-    return VariantSolution{std::move(x), unchanged};
+    return VariantSolution{std::move(x), false};
   });
 }
 
@@ -1348,7 +1355,7 @@ StatusOr<LevelResult> PreparedMotion::SolveOptimized(const ReducedSkeleton& leve
   auto solution = SolveVariant(d, level);
   if (!solution.ok()) return solution.status();
   const int m = level.kept_count();
-  const MatrixXd& x = solution->x;
+  const MatrixXd& x = solution->Matrices(d);
 
   LevelResult result;
   result.skeleton = level;
