@@ -154,9 +154,8 @@ struct PreparedMotion::Impl {
     // Whether Delta_k can be nonzero in some frame.
     bool Moves(int k) const { return solution != original || solution_row[k] != 4 * k; }
     Affine34d At(int k, int t) const { return TransposedAt(k, t).transpose(); }
-    // Frame t's Delta_k^T stacked: 4n x 3, block (4k, 0) = Delta_k(t)^T.
-    void Frame(int t, Eigen::Matrix<double, Eigen::Dynamic, 3>& out) const;
-    // The same for the listed joints only; the other blocks are left as they are.
+    // Frame t's Delta_k^T stacked (4n x 3, block (4k, 0) = Delta_k(t)^T) for the listed
+    // joints; the other blocks are left as they are.
     void Frame(int t, const std::vector<int>& joints, Eigen::Matrix<double, Eigen::Dynamic, 3>& out) const {
       for (int k : joints) out.block<4, 3>(4 * k, 0) = TransposedAt(k, t);
     }
@@ -177,8 +176,11 @@ struct PreparedMotion::Impl {
     std::vector<double> frame_bound;  // T
     std::vector<double> joint_bound;  // scratch, n
   };
-  // Bounds of every nonempty group, or (group_mask) of the groups it flags, for T frames.
-  MaxSearchBounds MakeMaxSearchBounds(const std::vector<uint8_t>* group_mask) const;
+  // Bounds of every nonempty group, or (group_mask) of the groups it flags, for T frames,
+  // and of those only where a joint that `moving` flags weights them, from those joints
+  // alone: the others' Delta is zero (a baseline's kept joints).
+  MaxSearchBounds MakeMaxSearchBounds(const std::vector<uint8_t>* group_mask,
+                                      const std::vector<uint8_t>& moving) const;
   // Where a maximum search starts: the largest |d_i(t)|^2 known (in float, as the search
   // compares them) and where it is.
   struct MaxSearchStart {
@@ -236,11 +238,13 @@ struct PreparedMotion::Impl {
   // (levels that keep most joints, baselines that remove few).
   std::optional<KeptForms> MakeKeptForms(const DeltaView& delta, const std::vector<int>& kept,
                                          size_t active_pairs) const;
-  // kept_frame: scratch for X(t), 4m x 3, where kept_forms is given.
+  // kept_frame: scratch for X(t), 4m x 3, where kept_forms is given. moving_kept: the kept
+  // joints whose Delta can be nonzero, the only ones with joint terms (none of a baseline's).
   void FrameQuadraticErrors(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame,
                             const std::vector<size_t>& active_pairs, const KeptForms* kept_forms,
                             Eigen::Matrix<double, Eigen::Dynamic, 3>& kept_frame,
-                            const std::vector<int>& kept, int t, LevelErrors& out) const;
+                            const std::vector<int>& kept, const std::vector<int>& moving_kept,
+                            int t, LevelErrors& out) const;
   void FrameBounds(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame, int t,
                    MaxSearchBounds& bounds) const;
   // The search starts from `start` (a value some vertex attains) and evaluates only the
@@ -508,11 +512,6 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
   return std::shared_ptr<const PreparedMotion>(new PreparedMotion(std::move(impl)));
 }
 
-void PreparedMotion::Impl::DeltaView::Frame(int t, Eigen::Matrix<double, Eigen::Dynamic, 3>& out) const {
-  const int n = static_cast<int>(solution_row.size());
-  for (int k = 0; k < n; ++k) out.block<4, 3>(4 * k, 0) = TransposedAt(k, t);
-}
-
 std::vector<size_t> PreparedMotion::Impl::ActivePairs(const DeltaView& delta) const {
   // Pairs with a joint whose Delta is zero in every frame add nothing (every kept joint of
   // a baseline): skip them.
@@ -529,8 +528,19 @@ void PreparedMotion::Impl::EvaluateErrors(const DeltaView& delta, const std::vec
     const bool quadratic = figures != Figures::kMaxVertexError;
     const bool maximum = figures != Figures::kQuadratic;
     const bool sampled = figures == Figures::kAll;
-    bool moves = false;
-    for (int k = 0; k < n && !moves; ++k) moves = delta.Moves(k);
+    // Only the joints whose Delta can be nonzero are read (all of an optimised level's, the
+    // removed ones of a baseline); the others' blocks of `frame` stay zero.
+    std::vector<uint8_t> moving(n, 0);
+    std::vector<int> moving_joints;
+    for (int k = 0; k < n; ++k) {
+      moving[k] = delta.Moves(k);
+      if (moving[k]) moving_joints.push_back(k);
+    }
+    const bool moves = !moving_joints.empty();
+    std::vector<int> moving_kept;
+    for (int j : kept) {
+      if (moving[j]) moving_kept.push_back(j);
+    }
     if (quadratic) {
       out.e.assign(frames, 0.0);
       out.ep_vertex.assign(frames, 0.0);
@@ -545,17 +555,18 @@ void PreparedMotion::Impl::EvaluateErrors(const DeltaView& delta, const std::vec
     const std::optional<KeptForms> kept_forms =
         quadratic ? MakeKeptForms(delta, kept, active_pairs.size()) : std::nullopt;
     Eigen::Matrix<double, Eigen::Dynamic, 3> kept_frame(kept_forms ? 4 * kept.size() : 0, 3);
-    MaxSearchBounds bounds = maximum ? MakeMaxSearchBounds(nullptr) : MaxSearchBounds{};
+    MaxSearchBounds bounds = maximum ? MakeMaxSearchBounds(nullptr, moving) : MaxSearchBounds{};
     SampleSums sums;
     size_t next_sample = 0;
     SampleScratch scratch(sampled ? n : 0, sampled ? sample_vertices.size() : 0);
     SampleValues values(sampled ? sample_vertices.size() : 0);
     Eigen::Matrix<double, Eigen::Dynamic, 3> frame(4 * n, 3);
+    frame.setZero();
     for (int t = 0; t < frames; ++t) {
-      delta.Frame(t, frame);
+      delta.Frame(t, moving_joints, frame);
       if (quadratic) {
         FrameQuadraticErrors(frame, active_pairs, kept_forms ? &*kept_forms : nullptr, kept_frame,
-                             kept, t, out);
+                             kept, moving_kept, t, out);
       }
       if (maximum) FrameBounds(frame, t, bounds);
       if (sampled && next_sample < sample_frames.size() && sample_frames[next_sample] == t) {
@@ -637,12 +648,11 @@ std::optional<PreparedMotion::Impl::KeptForms> PreparedMotion::Impl::MakeKeptFor
   return forms;
 }
 
-void PreparedMotion::Impl::FrameQuadraticErrors(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame,
-                                                const std::vector<size_t>& active_pairs,
-                                                const KeptForms* kept_forms,
-                                                Eigen::Matrix<double, Eigen::Dynamic, 3>& x,
-                                                const std::vector<int>& kept, int t,
-                                                LevelErrors& out) const {
+void PreparedMotion::Impl::FrameQuadraticErrors(
+    const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame, const std::vector<size_t>& active_pairs,
+    const KeptForms* kept_forms, Eigen::Matrix<double, Eigen::Dynamic, 3>& x,
+    const std::vector<int>& kept, const std::vector<int>& moving_kept, int t,
+    LevelErrors& out) const {
   // sum_kl tr(Delta_k^T C_kl Delta_l) over the joint pairs, lane by lane (AddTraceForms).
   const auto joint_pairs = [&](double& ep, double& en) {
     double p[4] = {}, n[4] = {};
@@ -693,7 +703,7 @@ void PreparedMotion::Impl::FrameQuadraticErrors(const Eigen::Matrix<double, Eige
   out.ep_vertex[t] = std::max(0.0, ep);
   out.en_vertex[t] = std::max(0.0, en);
   double joint_p[4] = {}, joint_n[4] = {};
-  for (int j : kept) {
+  for (int j : moving_kept) {
     const double* block = frame.data() + 4 * j;
     AddTraceForms(block, block, frame.rows(), joint_cp[j], joint_cn[j], joint_p, joint_n);
   }
@@ -846,7 +856,7 @@ inline float ChunkSquaredErrors(const float* rows, uint32_t padded,
 }  // namespace
 
 PreparedMotion::Impl::MaxSearchBounds PreparedMotion::Impl::MakeMaxSearchBounds(
-    const std::vector<uint8_t>* group_mask) const {
+    const std::vector<uint8_t>* group_mask, const std::vector<uint8_t>& moving) const {
   const Character& c = *character;
   const auto& group_clusters = c.group_cluster_offsets();
   const auto& group_influence_offsets = c.group_influence_offsets();
@@ -855,13 +865,18 @@ PreparedMotion::Impl::MaxSearchBounds PreparedMotion::Impl::MakeMaxSearchBounds(
   std::vector<uint8_t> weights_a_group(n, 0);
   for (int j = 0; j < n; ++j) {
     if (group_clusters[j] == group_clusters[j + 1] || (group_mask != nullptr && !(*group_mask)[j])) continue;
+    bool moved = false;
+    for (uint32_t q = group_influence_offsets[j]; q < group_influence_offsets[j + 1]; ++q) {
+      moved = moved || moving[group_influences[q].joint];
+    }
+    if (!moved) continue;
     bounds.groups.push_back(j);
     for (uint32_t q = group_influence_offsets[j]; q < group_influence_offsets[j + 1]; ++q) {
       weights_a_group[group_influences[q].joint] = 1;
     }
   }
   for (int k = 0; k < n; ++k) {
-    if (weights_a_group[k]) bounds.joints.push_back(k);
+    if (weights_a_group[k] && moving[k]) bounds.joints.push_back(k);
   }
   bounds.column_norms.resize(static_cast<size_t>(frames) * n);
   bounds.group_bound.assign(static_cast<size_t>(frames) * n, 0.0);
@@ -1498,8 +1513,10 @@ StatusOr<LevelErrors> BaselineSequence::Next(const ReducedSkeleton& level) {
     out.ep_joint.assign(d.frames, 0.0);  // kept joints keep their matrices: no joint error
     out.en_vertex.assign(d.frames, 0.0);
     out.en_joint.assign(d.frames, 0.0);
+    std::vector<uint8_t> moving(n, 0);
+    for (int k = 0; k < n; ++k) moving[k] = delta.Moves(k);
     PreparedMotion::Impl::MaxSearchBounds bounds =
-        d.MakeMaxSearchBounds(restart ? nullptr : &group_mask);
+        d.MakeMaxSearchBounds(restart ? nullptr : &group_mask, moving);
     PreparedMotion::Impl::SampleScratch scratch(n, changed_samples.size());
     size_t next_sample = 0;
     const size_t pair_count = d.pairs.size();

@@ -202,26 +202,37 @@ TEST(SolveLevel, MaxVertexErrorIsTheExactMaximum) {
   const Character& c = *s.character;
   for (int kept : {1, 3, 6}) {
     const LevelResult result = Solve(*prepared, s, kept);
-    // Brute force over every vertex and frame with the stored (float) matrices.
-    double brute = 0;
+    // Brute force over every vertex and frame with the stored (float) matrices, and for the
+    // baseline with the kept joints' original ones (its search reads only the removed
+    // joints, whose Delta is not zero).
+    double brute = 0, brute_baseline = 0;
     const auto reduced = ReduceInfluences(c.skin(), result.skeleton);
     const Eigen::MatrixXd& kt = prepared->original_matrices();
+    const auto original_matrix = [&](int joint, int t) -> Affine34d {
+      return kt.block<4, 3>(4 * joint, 3 * t).transpose();
+    };
     for (int t = 0; t < s.motion.frame_count; ++t) {
       for (int i = 0; i < c.vertex_count(); ++i) {
         const Vec3d v0 = c.skin().positions[i].cast<double>();
-        Vec3d original = Vec3d::Zero(), lod = Vec3d::Zero();
+        Vec3d original = Vec3d::Zero(), lod = Vec3d::Zero(), baseline = Vec3d::Zero();
         for (uint32_t e = c.skin().influence_offsets[i]; e < c.skin().influence_offsets[i + 1]; ++e) {
-          const Affine34d k = kt.block<4, 3>(4 * c.skin().influence_joints[e], 3 * t).transpose();
-          original += c.skin().influence_weights[e] * TransformPoint(k, v0);
+          original += c.skin().influence_weights[e] *
+                      TransformPoint(original_matrix(c.skin().influence_joints[e], t), v0);
         }
         for (uint32_t e = reduced.offsets[i]; e < reduced.offsets[i + 1]; ++e) {
           const Affine34d k = result.matrices[t * kept + reduced.slots[e]].cast<double>();
           lod += reduced.weights[e] * TransformPoint(k, v0);
+          const int kept_joint = result.skeleton.kept_joints[reduced.slots[e]];
+          baseline += reduced.weights[e] * TransformPoint(original_matrix(kept_joint, t), v0);
         }
         brute = std::max(brute, (original - lod).norm());
+        brute_baseline = std::max(brute_baseline, (original - baseline).norm());
       }
     }
     EXPECT_NEAR(result.optimized.max_vertex_error_pct, 100 * brute / c.height(), 1e-4) << kept;
+    EXPECT_GT(brute_baseline, 0) << kept;
+    EXPECT_NEAR(result.baseline.max_vertex_error_pct, 100 * brute_baseline / c.height(), 1e-4)
+        << kept;
   }
 }
 
