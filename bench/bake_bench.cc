@@ -160,8 +160,9 @@ void BM_Bake(benchmark::State& state, const Case* c, core::Variant variant, int 
   int levels = 0;
   // Stages of the bake from the times of its progress reports (the pipeline's own stage
   // names): import -> rank -> prepare -> one "solve" per final level -> encode -> measure.
-  // "prepare" to the first finished level holds PreparedMotion::Create, the bisection
-  // probes of the smallest useful level (default ladder) and the first level(s).
+  // "prepare" to the first finished level holds PreparedMotion::Create and the first
+  // level(s); the first to the last finished level, the other levels and, for the default
+  // ladder, the bisection probes of the smallest useful level and that level.
   struct Mark {
     std::string stage;
     Clock::time_point at;

@@ -168,17 +168,15 @@ def ladder_stages_table(runs, bakes, threads, lines):
             inputs, rank, first, later, count, encode = (
                 counter(runs, name, k) for k in ("inputs_s", "rank_s", "to_first_level_s",
                                                  "later_levels_s", "later_level_count", "encode_s"))
-            per_level = later / count if count else 0.0
-            probes = max(0.0, first - per_level)
 
             def pct(x):
                 return f"{ms(x)} ({100 * x / total:.0f}%)" if total else ms(x)
 
-            rows.append(f"| `{case}` | {v} | {ms(total)} | {pct(inputs)} | {pct(rank)} | {pct(probes)} "
-                        f"| {pct(later + per_level)} ({count + 1:.0f}) | {pct(encode)} |")
+            rows.append(f"| `{case}` | {v} | {ms(total)} | {pct(inputs)} | {pct(rank)} | {pct(first)} "
+                        f"| {pct(later)} ({count:.0f}) | {pct(encode)} |")
     if rows:
-        lines.append("| case | variant | bake ms | inputs | rank | prepare + bisection probes (estimate) "
-                     "| final levels (count) | encode |")
+        lines.append("| case | variant | bake ms | inputs | rank | Create and the first level "
+                     "| later levels and the search (levels) | encode |")
         lines.append("|---|---|---|---|---|---|---|---|")
         lines.extend(rows)
 
@@ -307,9 +305,11 @@ def render(context, runs, command, target):
         if threads == 1 and "default" in bakes[threads]:
             body += ["### Where the default-ladder bake goes, 1 thread (times of Bake's progress reports; "
                      "medians of per-iteration means)", "",
-                     "`prepare + bisection probes` is the time from the \"prepare\" report to the first "
-                     "finished final level, less one mean final level: PreparedMotion::Create for the motion "
-                     "and for the probe motion, and the probes of the smallest useful level.", ""]
+                     "`Create and the first level` is the time from the \"prepare\" report to the first "
+                     "finished level (PreparedMotion::Create and the full level, whose solve is the original "
+                     "matrices); `later levels and the search` runs from there to the last finished level: the "
+                     "ladder's other levels, the bisection probes of the smallest useful level (on at most 64 "
+                     "strided frames) and that level.", ""]
             ladder_stages_table(runs, bakes, threads, body)
             body.append("")
         if "all" in bakes[threads]:

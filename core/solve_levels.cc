@@ -281,6 +281,9 @@ struct PreparedMotion::Impl {
   // The figures that follow from the per-frame parts of E (e, mean_e, max_e, the RMS
   // error) and, where given, from the sample's sums.
   void FinishErrors(const SampleSums* sums, LevelErrors& out) const;
+  // Fills the sample's fields (sample_frames to sample_area) from the character, the
+  // settings and kt.
+  void PrepareSample();
 };
 
 namespace {
@@ -340,9 +343,7 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
   auto impl = std::make_unique<Impl>();
   Impl& d = *impl;
   const Character& c = *character;
-  const RawSkin& skin = c.skin();
   const int n = c.joint_count();
-  const int p = c.vertex_count();
   const int frames = motion.frame_count;
   d.character = character;
   d.settings = settings;
@@ -473,43 +474,95 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
     d.joint_fit[j] = d.alpha * d.joint_cp[j] + d.beta_fit * d.joint_cn[j];
   }
 
+  d.PrepareSample();
+  return std::shared_ptr<const PreparedMotion>(new PreparedMotion(std::move(impl)));
+}
+
+StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::EveryNthFrame(int stride) const {
+  if (stride < 1) return InvalidArgument("EveryNthFrame: the stride must be at least 1");
+  const Impl& d = *impl_;
+  auto impl = std::make_unique<Impl>();
+  Impl& e = *impl;
+  // What does not depend on the frames, as it is.
+  e.character = d.character;
+  e.settings = d.settings;
+  e.n = d.n;
+  e.pairs = d.pairs;
+  e.pair_cp = d.pair_cp;
+  e.pair_cn = d.pair_cn;
+  e.pair_fit = d.pair_fit;
+  e.joint_cp = d.joint_cp;
+  e.joint_cn = d.joint_cn;
+  e.joint_fit = d.joint_fit;
+  e.alpha = d.alpha;
+  e.beta = d.beta;
+  e.beta_fit = d.beta_fit;
+  // Each frame's columns of kt (fp_root, fn_root) and rows of ft (ktt), and its constants.
+  const int frames = (d.frames + stride - 1) / stride;
+  e.frames = frames;
+  const bool kept_forms = !d.const_p.empty();
+  e.kt.resize(d.kt.rows(), 3 * frames);
+  e.ft.resize(3 * frames, d.ft.cols());
+  e.ktt.resize(3 * frames, d.ktt.cols());
+  if (kept_forms) {
+    e.fp_root.resize(d.fp_root.rows(), 3 * frames);
+    e.fn_root.resize(d.fn_root.rows(), 3 * frames);
+  }
+  for (int t = 0; t < frames; ++t) {
+    const int source = t * stride;
+    e.kt.middleCols<3>(3 * t) = d.kt.middleCols<3>(3 * source);
+    e.ft.middleRows<3>(3 * t) = d.ft.middleRows<3>(3 * source);
+    e.ktt.middleRows<3>(3 * t) = d.ktt.middleRows<3>(3 * source);
+    if (kept_forms) {
+      e.fp_root.middleCols<3>(3 * t) = d.fp_root.middleCols<3>(3 * source);
+      e.fn_root.middleCols<3>(3 * t) = d.fn_root.middleCols<3>(3 * source);
+      e.const_p.push_back(d.const_p[source]);
+      e.const_n.push_back(d.const_n[source]);
+    }
+  }
+  e.PrepareSample();
+  return std::shared_ptr<const PreparedMotion>(new PreparedMotion(std::move(impl)));
+}
+
+void PreparedMotion::Impl::PrepareSample() {
   // The sample for the per-vertex figures, with the original blended normals.
-  d.sample_frames = EvenlySpaced(settings.sample_frames, frames);
+  const RawSkin& skin = character->skin();
+  const int p = character->vertex_count();
+  sample_frames = EvenlySpaced(settings.sample_frames, frames);
   constexpr int64_t kMinSampleVertices = 64;
   const int64_t motion_budget =
-      static_cast<int64_t>(p) * frames / (100 * static_cast<int64_t>(d.sample_frames.size()));
-  const int64_t sample_vertices =
+      static_cast<int64_t>(p) * frames / (100 * static_cast<int64_t>(sample_frames.size()));
+  const int64_t vertex_count =
       std::min<int64_t>(settings.sample_vertices, std::max(kMinSampleVertices, motion_budget));
-  const int stride = static_cast<int>((p + sample_vertices - 1) / sample_vertices);
+  const int stride = static_cast<int>((p + vertex_count - 1) / vertex_count);
   for (int i = 0; i < p; i += stride) {
     for (uint32_t e = skin.influence_offsets[i]; e < skin.influence_offsets[i + 1]; ++e) {
-      d.sample_influences.push_back({skin.influence_joints[e], skin.influence_weights[e]});
+      sample_influences.push_back({skin.influence_joints[e], skin.influence_weights[e]});
     }
-    d.sample_vertices.push_back({skin.positions[i], skin.normals[i], c.vertex_areas()[i],
-                                 static_cast<uint32_t>(d.sample_influences.size())});
-    d.sample_area += d.sample_vertices.back().area;
+    sample_vertices.push_back({skin.positions[i], skin.normals[i], character->vertex_areas()[i],
+                               static_cast<uint32_t>(sample_influences.size())});
+    sample_area += sample_vertices.back().area;
   }
-  const size_t sample_count = d.sample_vertices.size();
-  d.sample_normals.resize(d.sample_frames.size() * 4 * sample_count);
-  for (size_t q = 0; q < d.sample_frames.size(); ++q) {
-    const int t = d.sample_frames[q];
+  const size_t sample_count = sample_vertices.size();
+  sample_normals.resize(sample_frames.size() * 4 * sample_count);
+  for (size_t q = 0; q < sample_frames.size(); ++q) {
+    const int t = sample_frames[q];
     uint32_t e = 0;
-    for (size_t v = 0; v < d.sample_vertices.size(); ++v) {
-      const Impl::SampleVertex& sample = d.sample_vertices[v];
+    for (size_t v = 0; v < sample_vertices.size(); ++v) {
+      const SampleVertex& sample = sample_vertices[v];
       Vec3d normal = Vec3d::Zero();
       for (; e < sample.influence_end; ++e) {
-        const Impl::SampleInfluence& influence = d.sample_influences[e];
-        normal += influence.weight * (d.kt.block<3, 3>(4 * influence.joint, 3 * t).transpose() *
+        const SampleInfluence& influence = sample_influences[e];
+        normal += influence.weight * (kt.block<3, 3>(4 * influence.joint, 3 * t).transpose() *
                                       sample.normal.cast<double>());
       }
       const double length = normal.norm();
       const double inverse_length = length > 0 ? 1 / length : 0;
-      double* rows = d.sample_normals.data() + 4 * q * sample_count;
+      double* rows = sample_normals.data() + 4 * q * sample_count;
       for (int a = 0; a < 3; ++a) rows[a * sample_count + v] = normal[a] * inverse_length;
       rows[3 * sample_count + v] = inverse_length;
     }
   }
-  return std::shared_ptr<const PreparedMotion>(new PreparedMotion(std::move(impl)));
 }
 
 std::vector<size_t> PreparedMotion::Impl::ActivePairs(const DeltaView& delta) const {

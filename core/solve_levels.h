@@ -66,7 +66,7 @@ inline bool IsRigid(Variant v) { return v == Variant::kVPPD || v == Variant::kVP
 inline bool FitsNormals(Variant v) { return v == Variant::kVPNO || v == Variant::kVPNOPD; }
 
 // Bumped whenever results for the same inputs and settings may change.
-inline constexpr uint32_t kAlgorithmVersion = 5;
+inline constexpr uint32_t kAlgorithmVersion = 6;
 
 struct SolveSettings {
   Variant variant = Variant::kVPNOPD;
@@ -128,6 +128,13 @@ class PreparedMotion {
       const SolveSettings& settings, Workload workload = Workload::kSomeLevels,
       const PieceRunner& run = {});
   ~PreparedMotion();
+
+  // The same prepared motion on frames 0, stride, 2 stride, ... (stride >= 1): alpha and
+  // beta stay this motion's, and the normal matrix does not depend on the frames, so a
+  // level solved on it has this motion's solution on those frames, to rounding. Costs a
+  // copy of those frames' columns and a new sample (of the fewer frames), not a Create:
+  // what a search over levels probes on a long motion.
+  StatusOr<std::shared_ptr<const PreparedMotion>> EveryNthFrame(int stride) const;
 
   const Character& character() const;
   const SolveSettings& settings() const;

@@ -318,8 +318,9 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
     // bracket (the error grows as joints go, though not strictly, so this finds a count
     // that meets the bound with the one below failing). Probes only steer the search: on a
     // long motion they run on at most kProbeFrames evenly strided frames, and they only
-    // decide whether the maximum error is within the bound; the chosen level is then
-    // solved in full on every frame.
+    // decide whether the maximum error is within the bound (the level's own maximum on
+    // those frames: EveryNthFrame solves the full motion's problem); the chosen level is
+    // then solved in full on every frame.
     const double bound = request.smallest_useful_error_pct;
     int lo = minimum, hi = n;
     for (const auto& [count, result] : solved) {
@@ -335,18 +336,9 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
       const int stride = (motion.frame_count + kProbeFrames - 1) / kProbeFrames;
       std::shared_ptr<const core::PreparedMotion> probe = *prepared;
       if (stride > 1) {
-        core::Motion probe_motion;
-        probe_motion.fps = motion.fps / stride;
-        probe_motion.joint_count = n;
-        for (int t = 0; t < motion.frame_count; t += stride) {
-          probe_motion.joint_world.insert(probe_motion.joint_world.end(),
-                                          motion.joint_world.begin() + static_cast<size_t>(t) * n,
-                                          motion.joint_world.begin() + static_cast<size_t>(t + 1) * n);
-          ++probe_motion.frame_count;
-        }
-        auto created = core::PreparedMotion::Create(inputs->character, probe_motion, request.settings);
-        if (!created.ok()) return created.status();
-        probe = *created;
+        auto strided = (*prepared)->EveryNthFrame(stride);
+        if (!strided.ok()) return strided.status();
+        probe = *std::move(strided);
       }
       while (lo < hi) {
         if (Cancelled(cancel)) return CancelledStatus();

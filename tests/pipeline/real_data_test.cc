@@ -390,6 +390,63 @@ TEST_F(RealData, MaxVertexErrorWithinDecidesLikeTheExactMaximum) {
   }
 }
 
+// The probes' strided frames solve the full motion's problem: a level's matrices and errors
+// on every third frame are the full motion's on those frames, in both workloads (the
+// kept-space forms' columns are strided too).
+TEST_F(RealData, EveryNthFrameSolvesTheFullMotionsProblemOnItsFrames) {
+  constexpr int kStride = 3;
+  for (const char* file : {"characters/Fox.glb", "motions/09_11_cmu.fbx"}) {
+    const RealScene s = Load(file, 0, 100);
+    const int n = s.inputs.character->joint_count();
+    const int frames = s.inputs.motion.frame_count;
+    for (core::Variant variant : {core::Variant::kVP, core::Variant::kVPNOPD}) {
+      for (auto workload : {core::PreparedMotion::Workload::kSomeLevels,
+                            core::PreparedMotion::Workload::kEveryLevel}) {
+        core::SolveSettings settings;
+        settings.variant = variant;
+        const auto full =
+            *core::PreparedMotion::Create(s.inputs.character, s.inputs.motion, settings, workload);
+        const auto strided = full->EveryNthFrame(kStride);
+        ASSERT_TRUE(strided.ok()) << strided.status().ToString();
+        const core::PreparedMotion& every_third = **strided;
+        ASSERT_EQ(every_third.frame_count(), (frames + kStride - 1) / kStride) << file;
+        EXPECT_EQ(every_third.alpha(), full->alpha());
+        EXPECT_EQ(every_third.beta(), full->beta());
+        for (int kept : {n, n / 2, 2}) {
+          const core::ReducedSkeleton level = Level(s, kept);
+          const auto a = full->SolveLevel(level);
+          const auto b = every_third.SolveLevel(level);
+          ASSERT_TRUE(a.ok() && b.ok()) << file;
+          const std::string where = std::string(file) + " " + core::VariantName(variant) +
+                                    " kept " + std::to_string(kept);
+          for (int t = 0; t < every_third.frame_count(); ++t) {
+            const int source = t * kStride;
+            for (int slot = 0; slot < kept; ++slot) {
+              const core::Affine34f& ka = a->matrices[static_cast<size_t>(source) * kept + slot];
+              const core::Affine34f& kb = b->matrices[static_cast<size_t>(t) * kept + slot];
+              EXPECT_LE((ka - kb).norm(), 1e-5f * (1 + ka.norm())) << where << " frame " << source;
+            }
+            EXPECT_NEAR(b->optimized.e[t], a->optimized.e[source],
+                        1e-9 * a->optimized.e[source] + 1e-13)
+                << where << " frame " << source;
+            EXPECT_NEAR(b->baseline.e[t], a->baseline.e[source],
+                        1e-9 * a->baseline.e[source] + 1e-13)
+                << where << " frame " << source;
+          }
+          // Its maximum vertex error is the full one's over fewer frames.
+          EXPECT_LE(b->optimized.max_vertex_error_pct,
+                    a->optimized.max_vertex_error_pct * (1 + 1e-6))
+              << where;
+          if (kept < n) {
+            EXPECT_GT(b->optimized.max_vertex_error_pct, 0) << where;
+          }
+        }
+      }
+    }
+    EXPECT_FALSE(Prepare(s, core::Variant::kVP)->EveryNthFrame(0).ok());
+  }
+}
+
 TEST_F(RealData, TheReportTimesASkinningPassOnlyWhenAsked) {
   auto asset = io::LoadAssetFile(DataPath("characters/Fox.glb"));
   ASSERT_TRUE(asset.ok());
