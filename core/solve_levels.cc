@@ -498,7 +498,7 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::EveryNthFrame(in
   e.beta = d.beta;
   e.beta_fit = d.beta_fit;
   // Each frame's columns of kt (fp_root, fn_root) and rows of ft (ktt), and its constants.
-  const int frames = (d.frames + stride - 1) / stride;
+  const int frames = 1 + (d.frames - 1) / stride;  // d.frames >= 1; no overflow
   e.frames = frames;
   const bool kept_forms = !d.const_p.empty();
   e.kt.resize(d.kt.rows(), 3 * frames);

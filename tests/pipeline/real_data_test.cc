@@ -2,6 +2,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <limits>
 #include <string>
 
 #include <gtest/gtest.h>
@@ -443,7 +444,13 @@ TEST_F(RealData, EveryNthFrameSolvesTheFullMotionsProblemOnItsFrames) {
         }
       }
     }
-    EXPECT_FALSE(Prepare(s, core::Variant::kVP)->EveryNthFrame(0).ok());
+    const auto prepared = Prepare(s, core::Variant::kVP);
+    EXPECT_FALSE(prepared->EveryNthFrame(0).ok());
+    // A stride past the last frame keeps the first frame alone.
+    const auto first = prepared->EveryNthFrame(std::numeric_limits<int>::max());
+    ASSERT_TRUE(first.ok());
+    EXPECT_EQ((*first)->frame_count(), 1);
+    EXPECT_TRUE((*first)->SolveLevel(Level(s, 2)).ok()) << file;
   }
 }
 
