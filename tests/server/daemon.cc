@@ -72,26 +72,30 @@ bool Daemon::Start(const std::vector<std::string>& args, const std::vector<std::
   pid_ = pid;
   if (stdout_fd_ >= 0) ::close(stdout_fd_);
   stdout_fd_ = out[0];
-  std::string line;
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
-  while (std::chrono::steady_clock::now() < deadline) {
-    pollfd p{stdout_fd_, POLLIN, 0};
-    if (::poll(&p, 1, 100) <= 0) continue;
-    char c = 0;
-    if (::read(stdout_fd_, &c, 1) != 1) break;
-    if (c != '\n') {
-      line += c;
-      continue;
-    }
+  std::string line;
+  while (ReadStdoutLine(line, deadline)) {
     const std::string prefix = "listening on http://127.0.0.1:";
     if (line.rfind(prefix, 0) == 0) {
       port_ = std::stoi(line.substr(prefix.size()));
       return true;
     }
-    line.clear();
   }
   error = "motionlodd did not start; its log:\n" + Log();
   Stop(SIGKILL);
+  return false;
+}
+
+bool Daemon::ReadStdoutLine(std::string& line, std::chrono::steady_clock::time_point deadline) {
+  line.clear();
+  while (stdout_fd_ >= 0 && std::chrono::steady_clock::now() < deadline) {
+    pollfd p{stdout_fd_, POLLIN, 0};
+    if (::poll(&p, 1, 100) <= 0) continue;
+    char c = 0;
+    if (::read(stdout_fd_, &c, 1) != 1) return false;
+    if (c == '\n') return true;
+    line += c;
+  }
   return false;
 }
 

@@ -30,6 +30,10 @@ class Daemon {
   int Stop(int signal, std::chrono::seconds timeout = std::chrono::seconds(30));
   bool running() const { return pid_ > 0; }
 
+  // The next line the daemon prints on stdout (without its newline), or false at the
+  // deadline or the end of its output.
+  bool ReadStdoutLine(std::string& line, std::chrono::steady_clock::time_point deadline);
+
   int port() const { return port_; }
   std::unique_ptr<httplib::Client> Client() const;
   std::string Log() const;

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <set>
 
 #include "core/level_selection.h"
@@ -206,6 +207,50 @@ TEST(DaemonFlow, UploadBakeWatchAndFetchLevelsMatchTheEngineInProcess) {
   EXPECT_EQ(gone->status, 204);
   ExpectProblem(client->Get((std::string("/v1/characters/") + kSampleId).c_str()), 404);
   EXPECT_EQ(daemon.Stop(SIGTERM), 0) << daemon.Log();
+}
+
+// The run command's daemon (--seed) prints where each level of the sample is drawn: a
+// range that can be read for every level, including one that serves only a sliver of
+// heights (the sample's 12- and 9-joint levels differ in the sixth digit of their error).
+TEST(DaemonFlow, TheSeedPrintsAReadableHeightRangeForEveryLevel) {
+  Daemon daemon(TestDirectory());
+  ASSERT_TRUE(daemon.Start({"--seed", Sample(), "--seed-animation", "Walking_A"})) << daemon.error;
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  std::string line, bake_url;
+  std::vector<std::string> levels;
+  while (daemon.ReadStdoutLine(line, deadline)) {
+    if (line.rfind("bake (level table): ", 0) == 0) bake_url = line.substr(line.find("/v1/"));
+    if (line.rfind("  level ", 0) == 0) levels.push_back(line);
+    if (line.rfind("level for a character 120 px tall", 0) == 0) break;
+  }
+  ASSERT_FALSE(bake_url.empty()) << daemon.Log();
+  auto client = daemon.Client();
+  auto bake = client->Get(bake_url.c_str());
+  ASSERT_TRUE(bake);
+  ASSERT_EQ(bake->status, 200);
+  const json table = Json(bake)["levels"];
+  ASSERT_EQ(levels.size(), table.size());
+  for (size_t l = 0; l < levels.size(); ++l) {
+    const json& entry = table[l];
+    const std::string& printed = levels[l];
+    if (!entry["chosen"].get<bool>()) {
+      EXPECT_NE(printed.find("never"), std::string::npos) << printed;
+    } else if (entry.contains("px_max") && !entry["px_max"].is_null() &&
+               entry["px_max"].get<double>() - entry["px_min"].get<double>() < 0.05) {
+      EXPECT_NE(printed.find("only within 0.05 px of"), std::string::npos) << printed;
+    } else {
+      // "for heights above A px[ up to B px]" with A below B as printed.
+      double above = 0, up_to = 0;
+      const size_t at = printed.find("for heights above ");
+      ASSERT_NE(at, std::string::npos) << printed;
+      const int read = std::sscanf(printed.c_str() + at, "for heights above %lf px up to %lf px",
+                                   &above, &up_to);
+      ASSERT_GE(read, 1) << printed;
+      if (read == 2) {
+        EXPECT_LT(above, up_to) << printed;
+      }
+    }
+  }
 }
 
 TEST(DaemonFlow, ProgressStreamsAsServerSentEvents) {
