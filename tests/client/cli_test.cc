@@ -29,8 +29,8 @@ class ClientCli : public DaemonTest {
   // motionlod-client ARGS with stdout captured and stderr in a file beside the daemon's.
   CliRun Cli(const std::string& args) {
     const fs::path err_file = daemon_->dir() / "cli.stderr";
-    const std::string command = std::string(MOTIONLOD_CLIENT_CLI) + " " + args + " 2>" +
-                                err_file.string() + " </dev/null";
+    const std::string command =
+        MOTIONLOD_CLIENT_CLI " " + args + " 2>" + err_file.string() + " </dev/null";
     CliRun run;
     FILE* pipe = ::popen(command.c_str(), "r");
     if (pipe == nullptr) return run;

@@ -131,11 +131,11 @@ std::unique_ptr<httplib::Client> Daemon::Client() const {
 std::string Daemon::Log() const { return ReadFile((dir_ / "daemon.log").string()); }
 
 std::string SourcePath(const std::string& relative) {
-  return std::string(MOTIONLOD_SOURCE_DIR) + "/" + relative;
+  return (fs::path(MOTIONLOD_SOURCE_DIR) / relative).string();
 }
 
 std::string SharedDataPath(const std::string& relative) {
-  const std::string path = std::string(MOTIONLOD_SHARED_DATA) + "/" + relative;
+  const std::string path = (fs::path(MOTIONLOD_SHARED_DATA) / relative).string();
   return fs::exists(path) ? path : "";
 }
 

@@ -26,7 +26,7 @@ struct ProcessResult {
 
 // `environment`: assignments put before the command, e.g. "MOTIONLOD_SIMD=baseline".
 ProcessResult Exec(const std::string& args, const std::string& environment = "") {
-  const std::string command = environment + " " + std::string(MOTIONLOD_TOOL) + " " + args + " 2>&1";
+  const std::string command = environment + " " MOTIONLOD_TOOL " " + args + " 2>&1";
   ProcessResult run;
   FILE* pipe = ::popen(command.c_str(), "r");
   if (pipe == nullptr) return run;
@@ -54,7 +54,9 @@ class Cli : public ::testing::Test {
     fs::create_directories(dir_);
   }
   void TearDown() override { fs::remove_all(dir_); }
-  std::string Sample() const { return std::string(MOTIONLOD_SOURCE_DIR) + "/samples/Rig_Medium_MovementBasic.glb"; }
+  std::string Sample() const {
+    return MOTIONLOD_SOURCE_DIR "/samples/Rig_Medium_MovementBasic.glb";
+  }
   fs::path dir_;
 };
 
@@ -196,7 +198,7 @@ TEST_F(Cli, BadInputExitsWithTwoAndWritesNothing) {
 }
 
 std::string DataFile(const std::string& relative) {
-  return std::string(MOTIONLOD_SHARED_DATA) + "/" + relative;
+  return (fs::path(MOTIONLOD_SHARED_DATA) / relative).string();
 }
 
 // Joint nodes, skin joints and animation channels of an exported level.
