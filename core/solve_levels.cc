@@ -23,33 +23,46 @@ using PaddedDelta = Eigen::Matrix4f;
 
 namespace {
 
-// Adds tr(A^T Cp B) and tr(A^T Cn B), lane by lane, to p[4] and n[4] (each sums to its
-// trace): A and B are 4x3 blocks of column-major matrices with `stride` rows (4 contiguous
-// rows per column), Cp and Cn 4x4 (Cn a 3x3 padded with zeros, which leaves the translation
-// rows out). Plain loops over the 4 rows, so that the AVX2 version (base/simd.h) runs each
-// column as one 256-bit vector and defers the horizontal sum to the caller: Eigen's
-// fixed-size products keep 128-bit packets there and reduce every product on its own.
+// Four doubles as one vector (GCC's vector extensions): one 256-bit register in the AVX2
+// version (base/simd.h), two 128-bit ones in the baseline.
+typedef double Lanes4 __attribute__((vector_size(4 * sizeof(double))));
+// Four contiguous doubles at any address read as one vector: one unaligned load each. (A
+// memcpy of several into an array of Lanes4 went through the stack in 16-byte halves,
+// and each 32-byte read of them then waited for the two stores to retire.)
+typedef double UnalignedLanes4
+    __attribute__((vector_size(4 * sizeof(double)), aligned(alignof(double)), may_alias));
+inline const UnalignedLanes4* AsLanes4(const double* x) {
+  return reinterpret_cast<const UnalignedLanes4*>(x);
+}
+
+// Adds tr(A^T Cp B) and tr(A^T Cn B), lane by lane, to p and n (each sums to its trace): A
+// and B are 4x3 blocks of column-major matrices with `stride` rows (4 contiguous rows per
+// column), Cp and Cn 4x4 (Cn a 3x3 padded with zeros, which leaves the translation rows
+// out). As tr(A^T C B) = <C, A B^T>, the columns of A B^T are formed once for both forms:
+// 19 multiply-adds of four lanes where C B took 30, summed as a tree so that p and n wait
+// on one addition per call. Written with vector types rather than plain loops over the
+// rows: GCC vectorised those with every load lane-reversed and every element of B
+// broadcast by a shuffle, 20 shuffles per call on the one port Intel cores run them on.
 inline void AddTraceForms(const double* a, const double* b, Eigen::Index stride,
-                          const Eigen::Matrix4d& cp, const Eigen::Matrix4d& cn,
-                          double* __restrict p, double* __restrict n) {
-  for (int col = 0; col < 3; ++col) {
-    double product_p[4] = {}, product_n[4] = {};
-    for (int r = 0; r < 4; ++r) {
-      const double x = b[col * stride + r];
-      for (int i = 0; i < 4; ++i) {
-        product_p[i] += cp(i, r) * x;
-        product_n[i] += cn(i, r) * x;
-      }
-    }
-    for (int i = 0; i < 4; ++i) {
-      p[i] += a[col * stride + i] * product_p[i];
-      n[i] += a[col * stride + i] * product_n[i];
-    }
-  }
+                          const Eigen::Matrix4d& cp, const Eigen::Matrix4d& cn, Lanes4& p,
+                          Lanes4& n) {
+  const Lanes4 a0 = *AsLanes4(a), a1 = *AsLanes4(a + stride), a2 = *AsLanes4(a + 2 * stride);
+  const double* b1 = b + stride;
+  const double* b2 = b + 2 * stride;
+  // Column r of A B^T.
+  const Lanes4 outer0 = a0 * b[0] + a1 * b1[0] + a2 * b2[0];
+  const Lanes4 outer1 = a0 * b[1] + a1 * b1[1] + a2 * b2[1];
+  const Lanes4 outer2 = a0 * b[2] + a1 * b1[2] + a2 * b2[2];
+  const Lanes4 outer3 = a0 * b[3] + a1 * b1[3] + a2 * b2[3];
+  const UnalignedLanes4* cp_columns = AsLanes4(cp.data());
+  const UnalignedLanes4* cn_columns = AsLanes4(cn.data());  // the last one is zero
+  p += (cp_columns[0] * outer0 + cp_columns[1] * outer1) +
+       (cp_columns[2] * outer2 + cp_columns[3] * outer3);
+  n += (cn_columns[0] * outer0 + cn_columns[1] * outer1) + cn_columns[2] * outer2;
 }
 
 // The sum of AddTraceForms' four lanes.
-inline double LaneSum(const double* lanes) { return (lanes[0] + lanes[1]) + (lanes[2] + lanes[3]); }
+inline double LaneSum(const Lanes4& lanes) { return (lanes[0] + lanes[1]) + (lanes[2] + lanes[3]); }
 
 }  // namespace
 
@@ -203,16 +216,16 @@ struct PreparedMotion::Impl {
   std::vector<size_t> ActivePairs(const DeltaView& delta) const;
   // Joint pair q's terms of the vertex parts of Ep and En in a frame (4n x 3, Delta_k^T
   // stacked): tr(Delta_k^T Cp_kl Delta_l) and tr(Delta_k^T Cn_kl Delta_l), doubled for k != l.
-  // AddPairTerms adds them lane by lane to p[4] and n[4] (AddTraceForms).
-  void AddPairTerms(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame, size_t q, double* p,
-                    double* n) const {
+  // AddPairTerms adds them lane by lane to p and n (AddTraceForms).
+  void AddPairTerms(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame, size_t q, Lanes4& p,
+                    Lanes4& n) const {
     const auto [k, l] = pairs[q];
     AddTraceForms(frame.data() + 4 * k, frame.data() + 4 * l, frame.rows(), pair_cp[q], pair_cn[q],
                   p, n);
   }
   std::pair<double, double> PairTerms(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame,
                                       size_t q) const {
-    double p[4] = {}, n[4] = {};
+    Lanes4 p = {}, n = {};
     AddPairTerms(frame, q, p, n);
     return {LaneSum(p), LaneSum(n)};
   }
@@ -708,7 +721,7 @@ void PreparedMotion::Impl::FrameQuadraticErrors(
     LevelErrors& out) const {
   // sum_kl tr(Delta_k^T C_kl Delta_l) over the joint pairs, lane by lane (AddTraceForms).
   const auto joint_pairs = [&](double& ep, double& en) {
-    double p[4] = {}, n[4] = {};
+    Lanes4 p = {}, n = {};
     for (size_t q : active_pairs) AddPairTerms(frame, q, p, n);
     ep = LaneSum(p);
     en = LaneSum(n);
@@ -725,28 +738,25 @@ void PreparedMotion::Impl::FrameQuadraticErrors(
       x.row(4 * s + 3) -= root;
     }
     // Summed lane by lane (AddTraceForms): the quadratic terms, then minus twice the linear ones.
-    double sum_p[4] = {}, sum_n[4] = {};
+    Lanes4 sum_p = {}, sum_n = {};
     for (size_t q = 0; q < kept_forms->slot_pairs.size(); ++q) {
       const auto [s, u] = kept_forms->slot_pairs[q];
       AddTraceForms(x.data() + 4 * s, x.data() + 4 * u, x.rows(), kept_forms->slot_cp[q],
                     kept_forms->slot_cn[q], sum_p, sum_n);
     }
-    double linear_p[4] = {}, linear_n[4] = {};
+    Lanes4 linear_p = {}, linear_n = {};
     const double* fp = fp_root.data() + 3 * t * fp_root.rows();
     const double* fn = fn_root.data() + 3 * t * fn_root.rows();
     for (int k = 0; k < n; ++k) {
       const double* xs = x.data() + 4 * kept_forms->slot_of[k];
       for (int col = 0; col < 3; ++col) {
-        for (int i = 0; i < 4; ++i) {
-          linear_p[i] += xs[col * x.rows() + i] * fp[col * fp_root.rows() + 4 * k + i];
-          linear_n[i] += xs[col * x.rows() + i] * fn[col * fn_root.rows() + 4 * k + i];
-        }
+        const Lanes4 xc = *AsLanes4(xs + col * x.rows());
+        linear_p += xc * *AsLanes4(fp + col * fp_root.rows() + 4 * k);
+        linear_n += xc * *AsLanes4(fn + col * fn_root.rows() + 4 * k);
       }
     }
-    for (int i = 0; i < 4; ++i) {
-      sum_p[i] -= 2 * linear_p[i];
-      sum_n[i] -= 2 * linear_n[i];
-    }
+    sum_p -= 2 * linear_p;
+    sum_n -= 2 * linear_n;
     ep = LaneSum(sum_p) + const_p[t];
     en = LaneSum(sum_n) + const_n[t];
     if (ep < kKeptFormsPrecision * const_p[t] || en < kKeptFormsPrecision * const_n[t]) {
@@ -755,7 +765,7 @@ void PreparedMotion::Impl::FrameQuadraticErrors(
   }
   out.ep_vertex[t] = std::max(0.0, ep);
   out.en_vertex[t] = std::max(0.0, en);
-  double joint_p[4] = {}, joint_n[4] = {};
+  Lanes4 joint_p = {}, joint_n = {};
   for (int j : moving_kept) {
     const double* block = frame.data() + 4 * j;
     AddTraceForms(block, block, frame.rows(), joint_cp[j], joint_cn[j], joint_p, joint_n);
@@ -1597,7 +1607,7 @@ StatusOr<LevelErrors> BaselineSequence::Next(const ReducedSkeleton& level) {
       for (size_t q : changed_pairs) std::tie(pair_p[q], pair_n[q]) = d.PairTerms(frame, q);
       // Summed in four lanes, as EvaluateErrors sums the joint pairs' terms (the same to
       // rounding): one chain of dependent additions would wait on its own latency.
-      double ep[4] = {}, en[4] = {};
+      Lanes4 ep = {}, en = {};
       for (size_t e = 0; e < active_pairs.size(); ++e) {
         ep[e % 4] += pair_p[active_pairs[e]];
         en[e % 4] += pair_n[active_pairs[e]];
