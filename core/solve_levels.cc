@@ -34,6 +34,13 @@ typedef double UnalignedLanes4
 inline const UnalignedLanes4* AsLanes4(const double* x) {
   return reinterpret_cast<const UnalignedLanes4*>(x);
 }
+// The same for eight floats.
+typedef float Lanes8f __attribute__((vector_size(8 * sizeof(float))));
+typedef float UnalignedLanes8f
+    __attribute__((vector_size(8 * sizeof(float)), aligned(alignof(float)), may_alias));
+inline const UnalignedLanes8f* AsLanes8f(const float* x) {
+  return reinterpret_cast<const UnalignedLanes8f*>(x);
+}
 
 // Adds tr(A^T Cp B) and tr(A^T Cn B), lane by lane, to p and n (each sums to its trace): A
 // and B are 4x3 blocks of column-major matrices with `stride` rows (4 contiguous rows per
@@ -870,45 +877,41 @@ constexpr int kVertexLanes = Character::kClusterLanes;
 // |d_i|^2, d_i = sum_g w_ig Delta_g [v0_i; 1], of kVertexLanes vertices of a cluster in one
 // frame, from its lane block (Character::cluster_lanes: rows of `padded` floats, read from
 // the chunk's column on) and Delta_g of its influences' joints g (delta[g * delta_stride]).
-// Plain loops over the lanes, so that the AVX2 version (base/simd.h) keeps each blended
-// entry of the 8 vertices in one 256-bit register: a vertex at a time, the blends ran
-// 128 bits wide through each vertex's own influence list, with a horizontal sum at the end.
+// Each blended entry of the 8 vertices is one vector (a 256-bit register in the AVX2
+// version): a vertex at a time, the blends ran 128 bits wide through each vertex's own
+// influence list, with a horizontal sum at the end. Written with vector types: from plain
+// loops over the lanes GCC read the second and third coordinate rows one float at a time
+// (it could not prove `padded + v` contiguous) and kept the blend in memory.
 inline float ChunkSquaredErrors(const float* rows, uint32_t padded,
                                 const Character::InfluenceRange* influences,
                                 uint32_t influence_count, const PaddedDelta* delta,
                                 int delta_stride, float* squared) {
-  // Unrolled, so that the blend's 12 vectors are registers and not an array in memory.
-  float blended[12][kVertexLanes];  // entry 3a + i: the blended Delta(i, a)
+  static_assert(kVertexLanes == 8, "a chunk is one Lanes8f per row");
+  const size_t row = padded;
+  Lanes8f blended[12];  // entry 3a + i: the blended Delta(i, a)
   {
-    const float* weight = rows + 3 * padded;
+    const Lanes8f weight = *AsLanes8f(rows + 3 * row);
     const float* entries = delta[static_cast<size_t>(influences[0].joint) * delta_stride].data();
 #pragma GCC unroll 12
-    for (int e = 0; e < 12; ++e) {
-      const float entry = entries[4 * (e / 3) + e % 3];
-      for (int v = 0; v < kVertexLanes; ++v) blended[e][v] = weight[v] * entry;
-    }
+    for (int e = 0; e < 12; ++e) blended[e] = weight * entries[4 * (e / 3) + e % 3];
   }
   for (uint32_t g = 1; g < influence_count; ++g) {
-    const float* weight = rows + (3 + g) * padded;
+    const Lanes8f weight = *AsLanes8f(rows + (3 + g) * row);
     const float* entries = delta[static_cast<size_t>(influences[g].joint) * delta_stride].data();
 #pragma GCC unroll 12
-    for (int e = 0; e < 12; ++e) {
-      const float entry = entries[4 * (e / 3) + e % 3];
-      for (int v = 0; v < kVertexLanes; ++v) blended[e][v] += weight[v] * entry;
-    }
+    for (int e = 0; e < 12; ++e) blended[e] += weight * entries[4 * (e / 3) + e % 3];
+  }
+  const Lanes8f x = *AsLanes8f(rows), y = *AsLanes8f(rows + row), z = *AsLanes8f(rows + 2 * row);
+  Lanes8f length_squared = {};
+#pragma GCC unroll 3
+  for (int i = 0; i < 3; ++i) {
+    const Lanes8f moved = blended[i] * x + blended[3 + i] * y + blended[6 + i] * z + blended[9 + i];
+    length_squared += moved * moved;
   }
   float largest[kVertexLanes];
   for (int v = 0; v < kVertexLanes; ++v) {
-    const float x = rows[v], y = rows[padded + v], z = rows[2 * padded + v];
-    float length_squared = 0;
-#pragma GCC unroll 3
-    for (int i = 0; i < 3; ++i) {
-      const float moved =
-          blended[i][v] * x + blended[3 + i][v] * y + blended[6 + i][v] * z + blended[9 + i][v];
-      length_squared += moved * moved;
-    }
-    squared[v] = length_squared;
-    largest[v] = length_squared;
+    squared[v] = length_squared[v];
+    largest[v] = length_squared[v];
   }
   for (int width = kVertexLanes / 2; width > 0; width /= 2) {
     for (int v = 0; v < width; ++v) largest[v] = std::max(largest[v], largest[v + width]);
