@@ -34,6 +34,7 @@ typedef double UnalignedLanes4
 inline const UnalignedLanes4* AsLanes4(const double* x) {
   return reinterpret_cast<const UnalignedLanes4*>(x);
 }
+inline UnalignedLanes4* AsLanes4(double* x) { return reinterpret_cast<UnalignedLanes4*>(x); }
 // The same for eight floats.
 typedef float Lanes8f __attribute__((vector_size(8 * sizeof(float))));
 typedef float UnalignedLanes8f
@@ -176,8 +177,26 @@ struct PreparedMotion::Impl {
     Affine34d At(int k, int t) const { return TransposedAt(k, t).transpose(); }
     // Frame t's Delta_k^T stacked (4n x 3, block (4k, 0) = Delta_k(t)^T) for the listed
     // joints; the other blocks are left as they are.
+    // Column by column as whole vectors: AddTraceForms reads each column back as one, and a
+    // 32-byte read of two 16-byte stores (Eigen's packets here) waits for them to retire.
+    // (The pointers and strides are local: a store through a vector type that may alias
+    // anything would reload them from the matrices after every column.)
     void Frame(int t, const std::vector<int>& joints, Eigen::Matrix<double, Eigen::Dynamic, 3>& out) const {
-      for (int k : joints) out.block<4, 3>(4 * k, 0) = TransposedAt(k, t);
+      const double* s = solution->data() + 3 * t * solution->rows();
+      const double* o = original->data() + 3 * t * original->rows();
+      const Eigen::Index s_stride = solution->rows(), o_stride = original->rows();
+      const int* s_row = solution_row.data();
+      double* d = out.data();
+      const Eigen::Index d_stride = out.rows();
+      for (int k : joints) {
+        const double* sk = s + s_row[k];
+        const double* ok = o + 4 * k;
+        double* dk = d + 4 * k;
+        for (int col = 0; col < 3; ++col) {
+          *AsLanes4(dk + col * d_stride) =
+              *AsLanes4(sk + col * s_stride) - *AsLanes4(ok + col * o_stride);
+        }
+      }
     }
     // Delta_k(t)^T, the block Frame writes.
     Eigen::Matrix<double, 4, 3> TransposedAt(int k, int t) const {
