@@ -756,12 +756,21 @@ void PreparedMotion::Impl::FrameQuadraticErrors(
   if (kept_forms == nullptr) {
     joint_pairs(ep, en);
   } else {
-    // X_s^T with the root's translation taken out: rows 4s..4s+3 of frame t's columns.
+    // X_s^T with the root's translation taken out: rows 4s..4s+3 of frame t's columns, each
+    // column written whole (as DeltaView::Frame, for AddTraceForms' reads).
     const int m = static_cast<int>(kept.size());
-    const Eigen::RowVector3d root = kt.block<1, 3>(3, 3 * t);
-    for (int s = 0; s < m; ++s) {
-      x.block<4, 3>(4 * s, 0) = kept_forms->solution->block<4, 3>(kept_forms->slot_row[s], 3 * t);
-      x.row(4 * s + 3) -= root;
+    const MatrixXd& solution = *kept_forms->solution;
+    const Eigen::Index x_stride = x.rows(), solution_stride = solution.rows();
+    const double* solution_frame = solution.data() + 3 * t * solution_stride;
+    const int* slot_row = kept_forms->slot_row.data();
+    double* x_data = x.data();
+    for (int col = 0; col < 3; ++col) {
+      const Lanes4 root = {0, 0, 0, kt(3, 3 * t + col)};
+      const double* solution_column = solution_frame + col * solution_stride;
+      double* x_column = x_data + col * x_stride;
+      for (int s = 0; s < m; ++s) {
+        *AsLanes4(x_column + 4 * s) = *AsLanes4(solution_column + slot_row[s]) - root;
+      }
     }
     // Summed lane by lane (AddTraceForms): the quadratic terms, then minus twice the linear ones.
     Lanes4 sum_p = {}, sum_n = {};
