@@ -8,6 +8,8 @@
 # ladder. Without cases, a fixed set of short and long clips, rigid and not.
 # "bake" = one pipeline::Bake (the import comes before it and is not counted);
 # "skin" = one pipeline::SkinningPassSeconds of the same inputs on 1 thread.
+# SIMD (default baseline) picks the hot loops' version (base/simd.h): baseline counts the
+# same on any x86-64; auto counts the version this CPU runs (AVX2 and FMA where present).
 set -euo pipefail
 build=${1:?usage: count_instructions.sh BUILD_DIR [FILE:VARIANT[:all] ...]}
 shift
@@ -17,6 +19,8 @@ driver="$build/bench/motionlod_bench_bake_once"
 command -v valgrind >/dev/null || { echo "count_instructions: valgrind is not installed (apt-get install valgrind)" >&2; exit 2; }
 [ -x "$driver" ] || { echo "count_instructions: no $driver (build the target motionlod_bench_bake_once)" >&2; exit 2; }
 [ -d "$data" ] || { echo "count_instructions: no $data" >&2; exit 2; }
+simd=${SIMD:-baseline}
+case "$simd" in baseline | auto) ;; *) echo "count_instructions: SIMD must be baseline or auto" >&2; exit 2 ;; esac
 cases=("$@")
 if [ ${#cases[@]} -eq 0 ]; then
   cases=(motions/55_01_cmu.fbx:vpno+pd motions/cmu_131_01.bvh:vpno+pd motions/09_11_cmu.fbx:vp+pd
@@ -30,9 +34,7 @@ trap 'rm -rf "$work"' EXIT
 count() {
   local what=$1
   shift
-  # The baseline version of the hot loops (base/simd.h): valgrind 3.19 stops at some AVX
-  # encodings the AVX2 versions use (SIGILL), and the count is then the same on any x86-64.
-  MOTIONLOD_SIMD=baseline valgrind --tool=callgrind --instr-atstart=no --callgrind-out-file="$work/cg.out" \
+  MOTIONLOD_SIMD=$simd valgrind --tool=callgrind --instr-atstart=no --callgrind-out-file="$work/cg.out" \
     "$driver" "$@" >/dev/null 2>&1 || { echo "count_instructions: $what $* failed under valgrind" >&2; exit 2; }
   local total
   total=$(sed -n 's/^totals: *//p' "$work/cg.out" | head -n 1)
