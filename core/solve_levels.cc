@@ -1637,12 +1637,24 @@ StatusOr<LevelErrors> BaselineSequence::Next(const ReducedSkeleton& level) {
       double* pair_n = st.pair_n.data() + static_cast<size_t>(t) * pair_count;
       for (size_t q : changed_pairs) std::tie(pair_p[q], pair_n[q]) = d.PairTerms(frame, q);
       // Summed in four lanes, as EvaluateErrors sums the joint pairs' terms (the same to
-      // rounding): one chain of dependent additions would wait on its own latency.
+      // rounding): one chain of dependent additions would wait on its own latency. Four
+      // terms per vector: a lane written on its own goes through memory.
       Lanes4 ep = {}, en = {};
-      for (size_t e = 0; e < active_pairs.size(); ++e) {
-        ep[e % 4] += pair_p[active_pairs[e]];
-        en[e % 4] += pair_n[active_pairs[e]];
+      const size_t* active = active_pairs.data();
+      const size_t whole = active_pairs.size() / 4 * 4;
+      for (size_t e = 0; e < whole; e += 4) {
+        ep += Lanes4{pair_p[active[e]], pair_p[active[e + 1]], pair_p[active[e + 2]],
+                     pair_p[active[e + 3]]};
+        en += Lanes4{pair_n[active[e]], pair_n[active[e + 1]], pair_n[active[e + 2]],
+                     pair_n[active[e + 3]]};
       }
+      Lanes4 ep_tail = {}, en_tail = {};
+      for (size_t e = whole; e < active_pairs.size(); ++e) {
+        ep_tail[e - whole] = pair_p[active[e]];
+        en_tail[e - whole] = pair_n[active[e]];
+      }
+      ep += ep_tail;
+      en += en_tail;
       out.ep_vertex[t] = std::max(0.0, LaneSum(ep));
       out.en_vertex[t] = std::max(0.0, LaneSum(en));
       out.e[t] = d.alpha * (out.ep_vertex[t] + out.ep_joint[t]) +
