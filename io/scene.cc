@@ -26,14 +26,6 @@ void DecomposeLocal(SceneNode& node) {
   node.scale = scale;
 }
 
-core::Affine34d ComposeTrs(const Eigen::Vector3d& translation, const Eigen::Quaterniond& rotation,
-                           const Eigen::Vector3d& scale) {
-  core::Affine34d m;
-  m.leftCols<3>() = rotation.toRotationMatrix() * scale.asDiagonal();
-  m.col(3) = translation;
-  return m;
-}
-
 }  // namespace motionlod::io
 
 namespace motionlod::io {
