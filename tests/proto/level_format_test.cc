@@ -428,6 +428,27 @@ TEST(ValidateLevelSet, RejectsReflectionInRigidLevelSet) {
   EXPECT_THAT(ValidateLevelSet(data).message(), HasSubstr("flagged rigid"));
 }
 
+// Unit columns that are not orthogonal: only the off-diagonal entries of A^T A show it.
+// The last matrix of the last level, so that every other matrix is checked first.
+TEST(ValidateLevelSet, RejectsShearInRigidLevelSet) {
+  LevelSetData data = MakeRigidSample();
+  std::vector<float>& matrices = data.levels.back().matrices;
+  float* k = matrices.data() + matrices.size() - kMatrixFloats;
+  const float c = std::cos(0.01f), s = std::sin(0.01f);  // column 1 tilted towards column 0
+  for (int row = 0; row < 3; ++row) k[4 * row + 1] = c * k[4 * row + 1] + s * k[4 * row];
+  const Status status = ValidateLevelSet(data);
+  EXPECT_THAT(status.message(), HasSubstr("flagged rigid"));
+  const size_t slots = data.levels.back().kept_joints.size();
+  EXPECT_THAT(status.message(), HasSubstr("K'(frame 1, slot " + std::to_string(slots - 1) + ")"));
+  // Tilted by 1e-4 rad instead (a dot product of 1e-4): within the tolerance.
+  LevelSetData near = MakeRigidSample();
+  std::vector<float>& near_matrices = near.levels.back().matrices;
+  float* q = near_matrices.data() + near_matrices.size() - kMatrixFloats;
+  const float c4 = std::cos(1e-4f), s4 = std::sin(1e-4f);
+  for (int row = 0; row < 3; ++row) q[4 * row + 1] = c4 * q[4 * row + 1] + s4 * q[4 * row];
+  EXPECT_TRUE(ValidateLevelSet(near).ok());
+}
+
 // Levels are checked as independent pieces (on the bake's threads): whatever order they
 // run in, the problem reported is the first level's, as in a serial check.
 TEST(ValidateLevelSet, ReportsTheFirstBadLevelWhateverOrderLevelsAreCheckedIn) {
