@@ -142,7 +142,8 @@ std::vector<int> DefaultLadder(int joint_count, int minimum) {
 
 namespace {
 
-// PrepareInputs for a validated request, on `pool`.
+// PrepareInputs for a validated request, on `pool`, without the motion's check: Bake's
+// core entry points (the ranking, PreparedMotion::Create) each make it first.
 StatusOr<BakeInputs> PrepareInputsOn(const BakeRequest& request, TaskPool& pool) {
   BakeInputs inputs;
   const io::Asset& character_asset = *request.character;
@@ -181,9 +182,6 @@ StatusOr<BakeInputs> PrepareInputsOn(const BakeRequest& request, TaskPool& pool)
   inputs.character = **character;
   if (!motion_status.ok()) return motion_status;
   inputs.warnings.insert(inputs.warnings.end(), motion_warnings.begin(), motion_warnings.end());
-  if (Status status = core::ValidateMotion(inputs.motion, *inputs.character); !status.ok()) {
-    return status;
-  }
   return inputs;
 }
 
@@ -192,7 +190,12 @@ StatusOr<BakeInputs> PrepareInputsOn(const BakeRequest& request, TaskPool& pool)
 StatusOr<BakeInputs> PrepareInputs(const BakeRequest& request) {
   if (Status status = request.Validate(); !status.ok()) return status;
   TaskPool pool(request.threads);
-  return PrepareInputsOn(request, pool);
+  auto inputs = PrepareInputsOn(request, pool);
+  if (!inputs.ok()) return inputs.status();
+  if (Status status = core::ValidateMotion(inputs->motion, *inputs->character); !status.ok()) {
+    return status;
+  }
+  return inputs;
 }
 
 double SkinningPassSeconds(const core::Character& character, const core::Motion& motion,
