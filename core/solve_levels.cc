@@ -35,6 +35,25 @@ inline const UnalignedLanes4* AsLanes4(const double* x) {
   return reinterpret_cast<const UnalignedLanes4*>(x);
 }
 inline UnalignedLanes4* AsLanes4(double* x) { return reinterpret_cast<UnalignedLanes4*>(x); }
+// Four floats, and their unaligned stores.
+typedef float Lanes4f __attribute__((vector_size(4 * sizeof(float))));
+typedef float UnalignedLanes4f
+    __attribute__((vector_size(4 * sizeof(float)), aligned(alignof(float)), may_alias));
+inline UnalignedLanes4f* AsLanes4f(float* x) { return reinterpret_cast<UnalignedLanes4f*>(x); }
+// The rows of a 4x4 whose columns are x[0..3]: row a holds lane a of each, in order.
+// Unpacks within 128-bit halves, then a swap of halves: no lane-crossing shuffle per
+// element.
+inline void Transpose4(const Lanes4 x[4], Lanes4 rows[4]) {
+  typedef int64_t Index4 __attribute__((vector_size(4 * sizeof(int64_t))));
+  const Lanes4 even01 = __builtin_shuffle(x[0], x[1], Index4{0, 4, 2, 6});
+  const Lanes4 odd01 = __builtin_shuffle(x[0], x[1], Index4{1, 5, 3, 7});
+  const Lanes4 even23 = __builtin_shuffle(x[2], x[3], Index4{0, 4, 2, 6});
+  const Lanes4 odd23 = __builtin_shuffle(x[2], x[3], Index4{1, 5, 3, 7});
+  rows[0] = __builtin_shuffle(even01, even23, Index4{0, 1, 4, 5});
+  rows[1] = __builtin_shuffle(odd01, odd23, Index4{0, 1, 4, 5});
+  rows[2] = __builtin_shuffle(even01, even23, Index4{2, 3, 6, 7});
+  rows[3] = __builtin_shuffle(odd01, odd23, Index4{2, 3, 6, 7});
+}
 // The same for eight floats.
 typedef float Lanes8f __attribute__((vector_size(8 * sizeof(float))));
 typedef float UnalignedLanes8f
@@ -174,7 +193,6 @@ struct PreparedMotion::Impl {
 
     // Whether Delta_k can be nonzero in some frame.
     bool Moves(int k) const { return solution != original || solution_row[k] != 4 * k; }
-    Affine34d At(int k, int t) const { return TransposedAt(k, t).transpose(); }
     // Frame t's Delta_k^T stacked (4n x 3, block (4k, 0) = Delta_k(t)^T) for the listed
     // joints; the other blocks are left as they are.
     // Column by column as whole vectors: AddTraceForms reads each column back as one, and a
@@ -197,10 +215,6 @@ struct PreparedMotion::Impl {
               *AsLanes4(sk + col * s_stride) - *AsLanes4(ok + col * o_stride);
         }
       }
-    }
-    // Delta_k(t)^T, the block Frame writes.
-    Eigen::Matrix<double, 4, 3> TransposedAt(int k, int t) const {
-      return solution->block<4, 3>(solution_row[k], 3 * t) - original->block<4, 3>(4 * k, 3 * t);
     }
   };
   // The baseline's Delta_k = K_kept(phi(k)) - K_k of a validated level.
@@ -820,12 +834,6 @@ struct LaneDelta {
   double m[12][kLanes];
   double column_norms[3][kLanes];
 
-  void Set(int f, const Affine34d& delta, const Vec3d& norms) {
-    for (int a = 0; a < 4; ++a) {
-      for (int i = 0; i < 3; ++i) m[3 * a + i][f] = delta(i, a);
-    }
-    for (int a = 0; a < 3; ++a) column_norms[a][f] = norms[a];
-  }
   // The bounds of the maximum search (see MaxVertexError) for a box with center c and half
   // extents h: U_g = |Delta_g [c;1]| + sum_a |Delta_g(3x3) e_a| h_a in each lane, every loop
   // over the lanes one whole vector.
@@ -904,30 +912,31 @@ constexpr int kVertexLanes = Character::kClusterLanes;
 
 // |d_i|^2, d_i = sum_g w_ig Delta_g [v0_i; 1], of kVertexLanes vertices of a cluster in one
 // frame, from its lane block (Character::cluster_lanes: rows of `padded` floats, read from
-// the chunk's column on) and Delta_g of its influences' joints g (delta[g * delta_stride]).
+// the chunk's column on) and Delta_g of its influences' joints g (entry 3a + i, Delta_g(i,
+// a), at delta[(12 g + 3a + i) * kDeltaLanes]: the maximum search's float lanes).
 // Each blended entry of the 8 vertices is one vector (a 256-bit register in the AVX2
 // version): a vertex at a time, the blends ran 128 bits wide through each vertex's own
 // influence list, with a horizontal sum at the end. Written with vector types: from plain
 // loops over the lanes GCC read the second and third coordinate rows one float at a time
 // (it could not prove `padded + v` contiguous) and kept the blend in memory.
+template <int kDeltaLanes>
 inline float ChunkSquaredErrors(const float* rows, uint32_t padded,
                                 const Character::InfluenceRange* influences,
-                                uint32_t influence_count, const PaddedDelta* delta,
-                                int delta_stride, float* squared) {
+                                uint32_t influence_count, const float* delta, float* squared) {
   static_assert(kVertexLanes == 8, "a chunk is one Lanes8f per row");
   const size_t row = padded;
   Lanes8f blended[12];  // entry 3a + i: the blended Delta(i, a)
   {
     const Lanes8f weight = *AsLanes8f(rows + 3 * row);
-    const float* entries = delta[static_cast<size_t>(influences[0].joint) * delta_stride].data();
+    const float* entries = delta + static_cast<size_t>(influences[0].joint) * 12 * kDeltaLanes;
 #pragma GCC unroll 12
-    for (int e = 0; e < 12; ++e) blended[e] = weight * entries[4 * (e / 3) + e % 3];
+    for (int e = 0; e < 12; ++e) blended[e] = weight * entries[e * kDeltaLanes];
   }
   for (uint32_t g = 1; g < influence_count; ++g) {
     const Lanes8f weight = *AsLanes8f(rows + (3 + g) * row);
-    const float* entries = delta[static_cast<size_t>(influences[g].joint) * delta_stride].data();
+    const float* entries = delta + static_cast<size_t>(influences[g].joint) * 12 * kDeltaLanes;
 #pragma GCC unroll 12
-    for (int e = 0; e < 12; ++e) blended[e] += weight * entries[4 * (e / 3) + e % 3];
+    for (int e = 0; e < 12; ++e) blended[e] += weight * entries[e * kDeltaLanes];
   }
   const Lanes8f x = *AsLanes8f(rows), y = *AsLanes8f(rows + row), z = *AsLanes8f(rows + 2 * row);
   Lanes8f length_squared = {};
@@ -1065,10 +1074,16 @@ PreparedMotion::Impl::MaxSearchStart PreparedMotion::Impl::MaxVertexError(
     // for the whole batch at once, one frame per lane of a vector (the frames of a batch
     // have similar bounds, and most of them need the same groups and clusters bounded).
     constexpr int kLanes = 4;
+    static_assert(kLanes == 4, "a batch's Delta_k is transposed as Lanes4");
     std::vector<LaneDelta<kLanes>> lane_delta(n);
     // The exact evaluations blend in float (the skin's own precision): twice the throughput,
-    // and the figure is a display quantity. Entry kLanes k + f: Delta_k of lane f's frame.
-    std::vector<PaddedDelta> frame_delta_f(static_cast<size_t>(n) * kLanes, PaddedDelta::Zero());
+    // and the figure is a display quantity. Entry (12 k + 3a + i) kLanes + f: Delta_k(i, a)
+    // of lane f's frame.
+    std::vector<float> lane_delta_f(static_cast<size_t>(n) * 12 * kLanes);
+    const double* solution = delta.solution->data();
+    const double* original = delta.original->data();
+    const Eigen::Index s_stride = delta.solution->rows(), o_stride = delta.original->rows();
+    const int* s_row = delta.solution_row.data();
     std::vector<std::pair<double, int>> group_order;  // (largest lane bound, group)
     group_order.reserve(n);
     // The bounds of a group's or a cluster's vertices (entry `index` of a CSR list of
@@ -1092,12 +1107,36 @@ PreparedMotion::Impl::MaxSearchStart PreparedMotion::Impl::MaxVertexError(
           lane_used[f] = first + f < frame_order.size();
           lane_frame[f] = frame_order[lane_used[f] ? first + f : first];
         }
+        // Delta_k of the batch's frames in lanes. Frame t's Delta_k^T columns (DeltaView:
+        // column c of Delta_k^T is row c of Delta_k, four contiguous doubles) of the four
+        // frames are transposed into lanes as whole vectors: element by element, this copy
+        // was a third of the search.
+        const double* s_frame[kLanes];
+        const double* o_frame[kLanes];
+        for (int f = 0; f < kLanes; ++f) {
+          s_frame[f] = solution + 3 * lane_frame[f] * s_stride;
+          o_frame[f] = original + 3 * lane_frame[f] * o_stride;
+        }
         for (int k : bounds.joints) {
+          LaneDelta<kLanes>& lanes = lane_delta[k];
+          float* lanes_f = lane_delta_f.data() + static_cast<size_t>(k) * 12 * kLanes;
+          const Eigen::Index s_offset = s_row[k], o_offset = 4 * k;  // not reloaded per store
+          for (int c = 0; c < 3; ++c) {
+            Lanes4 row[kLanes], by_column[4];
+            for (int f = 0; f < kLanes; ++f) {
+              row[f] = *AsLanes4(s_frame[f] + c * s_stride + s_offset) -
+                       *AsLanes4(o_frame[f] + c * o_stride + o_offset);
+            }
+            Transpose4(row, by_column);
+            for (int a = 0; a < 4; ++a) {
+              *AsLanes4(lanes.m[3 * a + c]) = by_column[a];
+              *AsLanes4f(lanes_f + (3 * a + c) * kLanes) =
+                  __builtin_convertvector(by_column[a], Lanes4f);
+            }
+          }
           for (int f = 0; f < kLanes; ++f) {
-            const Affine34d dk = delta.At(k, lane_frame[f]);
-            lane_delta[k].Set(f, dk,
-                              bounds.column_norms[static_cast<size_t>(lane_frame[f]) * n + k]);
-            frame_delta_f[static_cast<size_t>(k) * kLanes + f].topRows<3>() = dk.cast<float>();
+            const Vec3d& norms = bounds.column_norms[static_cast<size_t>(lane_frame[f]) * n + k];
+            for (int a = 0; a < 3; ++a) lanes.column_norms[a][f] = norms[a];
           }
         }
         const auto group_bound = [&](int f, int j) {
@@ -1140,11 +1179,11 @@ PreparedMotion::Impl::MaxSearchStart PreparedMotion::Impl::MaxVertexError(
               if (!open[f] || cluster_bound[f] <= std::max(best, floor)) continue;
               for (uint32_t chunk = 0; chunk < padded; chunk += kVertexLanes) {
                 float squared[kVertexLanes];
-                const float largest = ChunkSquaredErrors(
+                const float largest = ChunkSquaredErrors<kLanes>(
                     block + chunk, padded,
                     cluster_influences.data() + cluster_influence_offsets[cluster],
                     cluster_influence_offsets[cluster + 1] - cluster_influence_offsets[cluster],
-                    frame_delta_f.data() + f, kLanes, squared);
+                    lane_delta_f.data() + f, squared);
                 if (!(largest > best_squared)) continue;
                 // Compared squared (sqrt is monotonic): the square root, its conversion and a
                 // compare with `best` in memory were a fifth of the search's time per vertex.
