@@ -561,11 +561,22 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::EveryNthFrame(in
     e.fp_root.resize(d.fp_root.rows(), 3 * frames);
     e.fn_root.resize(d.fn_root.rows(), 3 * frames);
   }
+  // ft and ktt a column at a time: a frame's three rows of a column are contiguous (row by
+  // row, as Eigen copies middleRows, every element is a column's stride from the last).
+  const auto copy_frame_rows = [&](const MatrixXd& from, MatrixXd& to) {
+    for (Eigen::Index col = 0; col < from.cols(); ++col) {
+      const double* source = from.col(col).data();
+      double* target = to.col(col).data();
+      for (int t = 0; t < frames; ++t) {
+        for (int r = 0; r < 3; ++r) target[3 * t + r] = source[3 * t * stride + r];
+      }
+    }
+  };
+  copy_frame_rows(d.ft, e.ft);
+  copy_frame_rows(d.ktt, e.ktt);
   for (int t = 0; t < frames; ++t) {
     const int source = t * stride;
     e.kt.middleCols<3>(3 * t) = d.kt.middleCols<3>(3 * source);
-    e.ft.middleRows<3>(3 * t) = d.ft.middleRows<3>(3 * source);
-    e.ktt.middleRows<3>(3 * t) = d.ktt.middleRows<3>(3 * source);
     if (kept_forms) {
       e.fp_root.middleCols<3>(3 * t) = d.fp_root.middleCols<3>(3 * source);
       e.fn_root.middleCols<3>(3 * t) = d.fn_root.middleCols<3>(3 * source);
