@@ -228,6 +228,9 @@ struct PreparedMotion::Impl {
     std::vector<double> group_bound;  // T x n: bound of group j's vertices in frame t
     std::vector<double> frame_bound;  // T
     std::vector<double> joint_bound;  // scratch, n
+    // The boxes of `joints`, four joints at a time (FrameBounds' lanes): lanes of their
+    // centers' x, y, z, then of their half extents' x, y, z (24 doubles per group).
+    std::vector<double> joint_boxes;
   };
   // Bounds of every nonempty group, or (group_mask) of the groups it flags, for T frames,
   // and of those only where a joint that `moving` flags weights them, from those joints
@@ -996,6 +999,16 @@ PreparedMotion::Impl::MaxSearchBounds PreparedMotion::Impl::MakeMaxSearchBounds(
   bounds.group_bound.assign(static_cast<size_t>(frames) * n, 0.0);
   bounds.frame_bound.assign(frames, 0.0);
   bounds.joint_bound.resize(n);
+  const size_t count = bounds.joints.size();
+  bounds.joint_boxes.assign(24 * ((count + 3) / 4), 0.0);
+  for (size_t e = 0; e < count; ++e) {
+    double* box = bounds.joint_boxes.data() + 24 * (e / 4) + e % 4;
+    const int k = bounds.joints[e];
+    for (int a = 0; a < 3; ++a) {
+      box[4 * a] = c.joint_vertex_centers()[k][a];
+      box[4 * (3 + a)] = c.joint_vertex_half_extents()[k][a];
+    }
+  }
   return bounds;
 }
 
@@ -1008,23 +1021,46 @@ void PreparedMotion::Impl::FrameBounds(const Eigen::Matrix<double, Eigen::Dynami
     const auto& group_influence_offsets = c.group_influence_offsets();
     const auto& group_influences = c.group_influences();
     Vec3d* norms = bounds.column_norms.data() + static_cast<size_t>(t) * n;
+    const double* delta = frame.data();
     const Eigen::Index stride = frame.rows();
-    for (int k : bounds.joints) {
-      // LaneDelta::BoxBounds' U_k for the joint's box, with the column norms it needs: their
-      // four square roots as one vector (one at a time, they were most of this loop's time).
-      const Vec3d& center = c.joint_vertex_centers()[k];
-      const Vec3d& half = c.joint_vertex_half_extents()[k];
-      double squared[4] = {};
+    const size_t count = bounds.joints.size();
+    // LaneDelta::BoxBounds' U_k for each joint's box, with the column norms it needs, four
+    // joints at a time, one per lane: each row of Delta_k (four contiguous doubles) of the
+    // four joints transposed into lanes, then every sum and square root as whole vectors.
+    // (A joint at a time, the sums were scalar and their vector of four roots waited on
+    // shuffles.) The last group repeats its last joint in the lanes it lacks.
+    for (size_t first = 0; first < count; first += 4) {
+      int k[4];
+      for (size_t j = 0; j < 4; ++j) k[j] = bounds.joints[std::min(first + j, count - 1)];
+      const double* boxes = bounds.joint_boxes.data() + 24 * (first / 4);
+      Lanes4 box[6];
+      for (int q = 0; q < 6; ++q) box[q] = *AsLanes4(boxes + 4 * q);
+      Lanes4 entry[3][4];  // entry[i][a]: Delta_k(i, a) of the four joints
       for (int i = 0; i < 3; ++i) {
-        const double* row = frame.data() + i * stride + 4 * k;  // Delta_k's row i
-        for (int a = 0; a < 3; ++a) squared[a] += row[a] * row[a];
-        const double moved = row[0] * center[0] + row[1] * center[1] + row[2] * center[2] + row[3];
+        Lanes4 row[4];
+        for (int j = 0; j < 4; ++j) row[j] = *AsLanes4(delta + i * stride + 4 * k[j]);
+        Transpose4(row, entry[i]);
+      }
+      Lanes4 squared[4];
+      for (int a = 0; a < 3; ++a) {
+        squared[a] =
+            entry[0][a] * entry[0][a] + entry[1][a] * entry[1][a] + entry[2][a] * entry[2][a];
+      }
+      squared[3] = Lanes4{};
+      for (int i = 0; i < 3; ++i) {
+        const Lanes4 moved =
+            entry[i][0] * box[0] + entry[i][1] * box[1] + entry[i][2] * box[2] + entry[i][3];
         squared[3] += moved * moved;
       }
-      double root[4];
-      for (int a = 0; a < 4; ++a) root[a] = std::sqrt(squared[a]);
-      norms[k] = Vec3d(root[0], root[1], root[2]);
-      bounds.joint_bound[k] = root[3] + root[0] * half[0] + root[1] * half[1] + root[2] * half[2];
+      Lanes4 root[4];
+      for (int a = 0; a < 4; ++a) {
+        for (int j = 0; j < 4; ++j) root[a][j] = std::sqrt(squared[a][j]);
+      }
+      const Lanes4 joint_bound = root[3] + root[0] * box[3] + root[1] * box[4] + root[2] * box[5];
+      for (size_t j = 0; j < 4 && first + j < count; ++j) {
+        norms[k[j]] = Vec3d(root[0][j], root[1][j], root[2][j]);
+        bounds.joint_bound[k[j]] = joint_bound[j];
+      }
     }
     for (int j : bounds.groups) {
       double u;
