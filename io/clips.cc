@@ -43,6 +43,13 @@ inline Eigen::Quaterniond Blend(const Eigen::Quaterniond& a, const Eigen::Quater
 // the keys, without slerp's acos and three sines.
 constexpr double kOnKey = 1e-9;
 
+// Key times this close to a frame of the clip's rate (a fraction of a frame) are on that
+// frame: off only by how the file wrote them (float seconds in glTF, a few decimals in
+// COLLADA, a rate derived from their median spacing), which put every sample of
+// Fox.glb, stormtrooper.dae or CesiumMan.glb at its own rate 1e-7 to 1e-3 of a frame past
+// a key, blended (slerp's acos and three sines) a step that small towards the next key.
+constexpr double kOnFrame = 1e-3;
+
 // The keyed value at time t: the first or last key outside the keys, else the two
 // surrounding keys blended (lerp for vectors, slerp for rotations). `cursor` is the index
 // of the key before the previous call's time: sampling walks a clip forward, a key or
@@ -256,9 +263,15 @@ StatusOr<std::vector<Clip>> BuildClips(const Scene& scene, const std::vector<cha
       }
       Track track;
       track.node = node;
+      const double fps = rates[c].fps;
       auto to_seconds = [&](const std::vector<double>& ticks) {
         std::vector<double> s(ticks.size());
-        for (size_t k = 0; k < ticks.size(); ++k) s[k] = (ticks[k] - start) * spt;
+        for (size_t k = 0; k < ticks.size(); ++k) {
+          s[k] = (ticks[k] - start) * spt;
+          // As SampleClip computes a frame's time, so that a sample on the frame is the key.
+          const double frame = std::round(s[k] * fps);
+          if (std::abs(s[k] * fps - frame) <= kOnFrame) s[k] = frame / fps;
+        }
         return s;
       };
       track.position_times = to_seconds(ch->position_times);

@@ -218,6 +218,44 @@ TEST(PoseSampler, ATimeWithinRoundingOfAKeyIsThatKey) {
   EXPECT_LT((world.leftCols<3>() - key).norm(), 1e-5);
 }
 
+TEST(BuildClips, KeysAHairOffTheFramesOfTheirRateAreOnThem) {
+  // Keys every 1/24 s written with the rounding of a file (float seconds, a few decimals):
+  // up to 1e-3 of a frame off, they are on the frame, so that sampling the clip at its own
+  // rate gives the keys themselves; a key 1e-2 of a frame off stays where it is.
+  SceneAnimation a;
+  a.name = "walk";
+  a.ticks_per_second = 1;
+  SceneChannel c = Channel("n");
+  const std::vector<double> frame_offsets = {0, 1e-7, -2e-5, 4e-4, -9e-4, 1e-2, 0, 0};
+  for (size_t k = 0; k < frame_offsets.size(); ++k) {
+    c.rotation_times.push_back((k + frame_offsets[k]) / 24.0);
+    c.rotations.push_back(Quaterniond(Eigen::AngleAxisd(0.2 * k, Vector3d::UnitY())));
+  }
+  a.duration_ticks = c.rotation_times.back();
+  a.channels.push_back(c);
+  const Scene scene = OneNodeScene(a);
+  std::vector<std::string> warnings;
+  const auto clips = BuildClips(scene, {1}, warnings);
+  ASSERT_TRUE(clips.ok()) << clips.status().ToString();
+  const Clip& clip = clips->front();
+  ASSERT_EQ(clip.info.source_fps, 24.0);
+  const Track& track = clip.tracks.front();
+  PoseSampler sampler(scene.nodes, {0});
+  for (int k = 0; k < 5; ++k) {
+    EXPECT_EQ(track.rotation_times[k], k / 24.0) << k;
+    core::Affine34d world;
+    sampler.Evaluate(&clip, k / 24.0, &world);
+    EXPECT_EQ(world.leftCols<3>(), c.rotations[k].toRotationMatrix()) << k;
+  }
+  EXPECT_DOUBLE_EQ(track.rotation_times[5], 5.01 / 24.0);
+  // Frame 5 lies between keys 4 and 5, 99% of the way: a blend, not key 5.
+  core::Affine34d world;
+  sampler.Evaluate(&clip, 5 / 24.0, &world);
+  const double angle = 0.2 * (4 + 1 / 1.01);
+  EXPECT_TRUE(world.leftCols<3>().isApprox(
+      Eigen::AngleAxisd(angle, Vector3d::UnitY()).toRotationMatrix(), 1e-12));
+}
+
 TEST(BuildClips, MergesUnnamedSingleChannelAnimationsOfEqualLength) {
   Scene scene;
   for (const char* name : {"a", "b", "c"}) {
