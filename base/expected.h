@@ -28,6 +28,9 @@ class [[nodiscard]] Expected {
   const T* operator->() const { return &value(); }
   T& operator*() & { return value(); }
   const T& operator*() const& { return value(); }
+  // `*std::move(e)` moves the value out (without this overload it bound to the const&
+  // one and copied it: a level's matrices, errors and skeleton per call).
+  T&& operator*() && { return std::move(*this).value(); }
 
  private:
   std::variant<T, E> value_;
