@@ -1492,9 +1492,25 @@ StatusOr<VariantSolution> SolveVariant(const PreparedMotion::Impl& d, const Redu
         // G_TT and G_TN keep G's block sparsity: G_TT is a block matrix of 1x1 blocks, and
         // each coefficient of G_TN subtracts one contiguous column of all frames.
         // Transposed copies are made column by column of x: reading a row of x would touch
-        // one cache line per column, every line of a long motion's x for each row.
+        // one cache line per column, every line of a long motion's x for each row. Four
+        // columns at a time, each slot's four rows of them (four contiguous doubles) are
+        // transposed as whole vectors (Transpose4): element by element, every element was a
+        // load and a store of its own.
         MatrixXd x_nt(cols, 3 * m);
-        for (int col = 0; col < cols; ++col) {
+        const Eigen::Index x_stride = x.rows(), nt_stride = x_nt.rows();
+        const double* x_data = x.data();
+        double* nt_data = x_nt.data();
+        int col = 0;
+        for (; col + 4 <= cols; col += 4) {
+          for (int s = 0; s < m; ++s) {
+            Lanes4 rows[4], columns[4];
+            for (int f = 0; f < 4; ++f) rows[f] = *AsLanes4(x_data + (col + f) * x_stride + 4 * s);
+            Transpose4(rows, columns);
+            for (int r = 0; r < 3; ++r)
+              *AsLanes4(nt_data + (3 * s + r) * nt_stride + col) = columns[r];
+          }
+        }
+        for (; col < cols; ++col) {
           for (int s = 0; s < m; ++s) {
             for (int r = 0; r < 3; ++r) x_nt(col, 3 * s + r) = x(4 * s + r, col);
           }
