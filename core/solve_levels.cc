@@ -44,15 +44,14 @@ inline UnalignedLanes4f* AsLanes4f(float* x) { return reinterpret_cast<Unaligned
 // Unpacks within 128-bit halves, then a swap of halves: no lane-crossing shuffle per
 // element.
 inline void Transpose4(const Lanes4 x[4], Lanes4 rows[4]) {
-  typedef int64_t Index4 __attribute__((vector_size(4 * sizeof(int64_t))));
-  const Lanes4 even01 = __builtin_shuffle(x[0], x[1], Index4{0, 4, 2, 6});
-  const Lanes4 odd01 = __builtin_shuffle(x[0], x[1], Index4{1, 5, 3, 7});
-  const Lanes4 even23 = __builtin_shuffle(x[2], x[3], Index4{0, 4, 2, 6});
-  const Lanes4 odd23 = __builtin_shuffle(x[2], x[3], Index4{1, 5, 3, 7});
-  rows[0] = __builtin_shuffle(even01, even23, Index4{0, 1, 4, 5});
-  rows[1] = __builtin_shuffle(odd01, odd23, Index4{0, 1, 4, 5});
-  rows[2] = __builtin_shuffle(even01, even23, Index4{2, 3, 6, 7});
-  rows[3] = __builtin_shuffle(odd01, odd23, Index4{2, 3, 6, 7});
+  const Lanes4 even01 = __builtin_shufflevector(x[0], x[1], 0, 4, 2, 6);
+  const Lanes4 odd01 = __builtin_shufflevector(x[0], x[1], 1, 5, 3, 7);
+  const Lanes4 even23 = __builtin_shufflevector(x[2], x[3], 0, 4, 2, 6);
+  const Lanes4 odd23 = __builtin_shufflevector(x[2], x[3], 1, 5, 3, 7);
+  rows[0] = __builtin_shufflevector(even01, even23, 0, 1, 4, 5);
+  rows[1] = __builtin_shufflevector(odd01, odd23, 0, 1, 4, 5);
+  rows[2] = __builtin_shufflevector(even01, even23, 2, 3, 6, 7);
+  rows[3] = __builtin_shufflevector(odd01, odd23, 2, 3, 6, 7);
 }
 // The same for eight floats.
 typedef float Lanes8f __attribute__((vector_size(8 * sizeof(float))));

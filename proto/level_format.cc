@@ -274,15 +274,15 @@ inline bool IsRotation(const float* k) {
   const Floats4 r0 = *reinterpret_cast<const UnalignedFloats4*>(k);
   const Floats4 r1 = *reinterpret_cast<const UnalignedFloats4*>(k + 4);
   const Floats4 r2 = *reinterpret_cast<const UnalignedFloats4*>(k + 8);
-  const Ints4 next = {1, 2, 0, 3}, after = {2, 0, 1, 3};  // lane a to a + 1, a + 2 (mod 3)
+  // Lane a to lane a + 1 and a + 2 (mod 3), lane 3 in place.
+  const auto next = [](Floats4 v) { return __builtin_shufflevector(v, v, 1, 2, 0, 3); };
+  const auto after = [](Floats4 v) { return __builtin_shufflevector(v, v, 2, 0, 1, 3); };
   // Lane a: (A^T A)(a, a) - 1 and (A^T A)(a, a + 1 mod 3).
   const Floats4 diagonal = r0 * r0 + r1 * r1 + r2 * r2 - 1.0f;
-  const Floats4 off_diagonal = r0 * __builtin_shuffle(r0, next) + r1 * __builtin_shuffle(r1, next) +
-                               r2 * __builtin_shuffle(r2, next);
-  const Floats4 cross = __builtin_shuffle(r1, next) * __builtin_shuffle(r2, after) -
-                        __builtin_shuffle(r1, after) * __builtin_shuffle(r2, next);
+  const Floats4 off_diagonal = r0 * next(r0) + r1 * next(r1) + r2 * next(r2);
+  const Floats4 cross = next(r1) * after(r2) - after(r1) * next(r2);
   const Floats4 terms = r0 * cross;
-  const Floats4 det = terms + __builtin_shuffle(terms, next) + __builtin_shuffle(terms, after);
+  const Floats4 det = terms + next(terms) + after(terms);
   // NaN fails every comparison.
   const Ints4 ok = (diagonal <= kTolerance) & (diagonal >= -kTolerance) &
                    (off_diagonal <= kTolerance) & (off_diagonal >= -kTolerance) & (det > 0.0f);
