@@ -31,7 +31,12 @@ command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
 cmake -S "$root" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DCMAKE_CXX_COMPILER=clang++ -DMOTIONLOD_BUILD_FUZZERS=ON -DMOTIONLOD_BUILD_TESTS=OFF \
   "${launcher[@]}" >/dev/null
-ninja -C "$build" "${targets[@]}" make_seeds >/dev/null
+# Quiet unless the build fails: then its errors, not a bare exit status.
+if ! ninja -C "$build" "${targets[@]}" make_seeds >"$build/build.log" 2>&1; then
+  grep -E 'error|FAILED' "$build/build.log" | head -n 40 >&2
+  echo "fuzz: building the fuzz targets with clang failed (the whole log: $build/build.log)" >&2
+  exit 1
+fi
 
 # Seeds: copied at run time, never committed (the data set is 19 MiB).
 seed_files=("$root"/samples/*.glb)
