@@ -11,7 +11,21 @@
 namespace motionlod::core {
 namespace {
 
-bool IsFinite(const Vec3f& v) { return v.allFinite(); }
+// Eigen's allFinite() was an out-of-line call per vector here.
+bool IsFinite(const Vec3f& v) {
+  return std::isfinite(v.x()) && std::isfinite(v.y()) && std::isfinite(v.z());
+}
+
+typedef double Lanes2 __attribute__((vector_size(2 * sizeof(double))));
+typedef double UnalignedLanes2
+    __attribute__((vector_size(2 * sizeof(double)), aligned(alignof(double)), may_alias));
+inline UnalignedLanes2* AsLanes2(double* x) { return reinterpret_cast<UnalignedLanes2*>(x); }
+typedef float Lanes4f __attribute__((vector_size(4 * sizeof(float))));
+typedef float UnalignedLanes4f
+    __attribute__((vector_size(4 * sizeof(float)), aligned(alignof(float)), may_alias));
+inline const UnalignedLanes4f* AsLanes4f(const float* x) {
+  return reinterpret_cast<const UnalignedLanes4f*>(x);
+}
 
 std::string JointLabel(const RawSkeleton& s, int j) {
   return "joint " + std::to_string(j) + " ('" + s.joint_names[j] + "')";
@@ -272,18 +286,34 @@ StatusOr<std::shared_ptr<const Character>> BuildCharacter(RawCharacter raw, cons
     // The splitting works on a contiguous copy of each group's positions: comparing through
     // the vertex indices cost a cache miss per comparison on a large mesh.
     std::vector<ClusterPoint> points;
-    auto point_box = [](const ClusterPoint* begin, const ClusterPoint* end, Vec3d& center, Vec3d& half) {
-      float lo[3], hi[3];
-      for (int a = 0; a < 3; ++a) lo[a] = hi[a] = begin->position[a];
-      for (const ClusterPoint* q = begin + 1; q != end; ++q) {
-        for (int a = 0; a < 3; ++a) {
-          lo[a] = std::min(lo[a], q->position[a]);
-          hi[a] = std::max(hi[a], q->position[a]);
+    // The bounds as whole 16-byte points (the vertex index rides along in the last lane,
+    // unused), in four independent chains: one min and max per point instead of three
+    // dependent ones.
+    auto point_box = [](const ClusterPoint* begin, const ClusterPoint* end, Vec3d& center,
+                        Vec3d& half) {
+      const auto point = [](const ClusterPoint* q) { return *AsLanes4f(q->position); };
+      Lanes4f lo[4], hi[4];
+      for (int chain = 0; chain < 4; ++chain) lo[chain] = hi[chain] = point(begin);
+      const ClusterPoint* q = begin + 1;
+      for (; end - q >= 4; q += 4) {
+        for (int chain = 0; chain < 4; ++chain) {
+          const Lanes4f x = point(q + chain);
+          lo[chain] = x < lo[chain] ? x : lo[chain];
+          hi[chain] = hi[chain] < x ? x : hi[chain];
         }
       }
+      for (; q != end; ++q) {
+        const Lanes4f x = point(q);
+        lo[0] = x < lo[0] ? x : lo[0];
+        hi[0] = hi[0] < x ? x : hi[0];
+      }
+      for (int chain = 1; chain < 4; ++chain) {
+        lo[0] = lo[chain] < lo[0] ? lo[chain] : lo[0];
+        hi[0] = hi[0] < hi[chain] ? hi[chain] : hi[0];
+      }
       for (int a = 0; a < 3; ++a) {
-        center[a] = 0.5 * (static_cast<double>(lo[a]) + static_cast<double>(hi[a]));
-        half[a] = 0.5 * (static_cast<double>(hi[a]) - static_cast<double>(lo[a]));
+        center[a] = 0.5 * (static_cast<double>(lo[0][a]) + static_cast<double>(hi[0][a]));
+        half[a] = 0.5 * (static_cast<double>(hi[0][a]) - static_cast<double>(lo[0][a]));
       }
     };
     std::vector<std::pair<uint32_t, uint32_t>> stack;
@@ -421,18 +451,21 @@ StatusOr<std::shared_ptr<const Character>> BuildCharacter(RawCharacter raw, cons
       std::vector<int> slot(static_cast<size_t>(n) * n, -1);
       std::vector<std::pair<int, int>> pairs;
       std::vector<double> sums;
-      alignas(32) double entries[kEntries];
       for (int i = 0; i < p; ++i) {
         const double a = c->vertex_areas_[i] / total;
-        const double v[4] = {k.positions[i].x(), k.positions[i].y(), k.positions[i].z(), 1.0};
-        const double m[3] = {k.normals[i].x(), k.normals[i].y(), k.normals[i].z()};
-        int e = 0;
-        for (int r = 0; r < 4; ++r) {
-          for (int q = r; q < 4; ++q) entries[e++] = v[r] * v[q];
-        }
-        for (int r = 0; r < 3; ++r) {
-          for (int q = r; q < 3; ++q) entries[e++] = m[r] * m[q];
-        }
+        const double x = k.positions[i].x(), y = k.positions[i].y(), z = k.positions[i].z();
+        const double nx = k.normals[i].x(), ny = k.normals[i].y(), nz = k.normals[i].z();
+        // The row of 16, upper triangles row by row (v_r v_q for q >= r with v = [x y z 1],
+        // then the normal's), built as pairs in registers: written one double at a time,
+        // each 16-byte read of the row waited for two stores to retire.
+        const Lanes2 entries[kEntries / 2] = {Lanes2{x, y} * x,
+                                              Lanes2{z, 1.0} * x,
+                                              Lanes2{y, y} * Lanes2{y, z},
+                                              Lanes2{y, z} * Lanes2{1.0, z},
+                                              Lanes2{z, 1.0},
+                                              Lanes2{nx, nx} * Lanes2{nx, ny},
+                                              Lanes2{nx, ny} * Lanes2{nz, ny},
+                                              Lanes2{ny, nz} * Lanes2{nz, nz}};
         for (uint32_t f = k.influence_offsets[i]; f < k.influence_offsets[i + 1]; ++f) {
           for (uint32_t g = f; g < k.influence_offsets[i + 1]; ++g) {
             const int lo = std::min(k.influence_joints[f], k.influence_joints[g]);
@@ -444,8 +477,8 @@ StatusOr<std::shared_ptr<const Character>> BuildCharacter(RawCharacter raw, cons
               sums.resize(sums.size() + kEntries, 0.0);
             }
             const double w = a * k.influence_weights[f] * k.influence_weights[g];
-            double* sum = sums.data() + static_cast<size_t>(index) * kEntries;
-            for (int x = 0; x < kEntries; ++x) sum[x] += w * entries[x];
+            UnalignedLanes2* sum = AsLanes2(sums.data() + static_cast<size_t>(index) * kEntries);
+            for (int e = 0; e < kEntries / 2; ++e) sum[e] += w * entries[e];
           }
         }
       }
