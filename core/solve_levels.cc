@@ -1570,10 +1570,15 @@ StatusOr<LevelResult> PreparedMotion::SolveOptimized(const ReducedSkeleton& leve
   LevelResult result;
   result.skeleton = level;
   result.matrices.resize(static_cast<size_t>(d.frames) * m);
+  // Row r of K'_s(t) is column 3t + r of x from row 4s: four contiguous doubles, converted
+  // as one vector into the row-major matrix's row.
   for (int t = 0; t < d.frames; ++t) {
     for (int s = 0; s < m; ++s) {
-      result.matrices[static_cast<size_t>(t) * m + s] =
-          x.block<4, 3>(4 * s, 3 * t).transpose().cast<float>();
+      float* rows = result.matrices[static_cast<size_t>(t) * m + s].data();
+      for (int r = 0; r < 3; ++r) {
+        *AsLanes4f(rows + 4 * r) =
+            __builtin_convertvector(*AsLanes4(x.data() + (3 * t + r) * x.rows() + 4 * s), Lanes4f);
+      }
     }
   }
   d.EvaluateErrors(solution->Delta(d, level), level.kept_joints, Impl::Figures::kAll, result.optimized);

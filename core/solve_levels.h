@@ -106,7 +106,7 @@ struct LevelErrors {
 struct LevelResult {
   ReducedSkeleton skeleton;
   // T x m, row-major by frame: K'_s(t) maps bind-pose model space to posed model space.
-  std::vector<Affine34f> matrices;
+  std::vector<RowMajorAffine34f> matrices;
   LevelErrors optimized;
   LevelErrors baseline;  // kept joints keep their original matrices
 };

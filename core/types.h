@@ -13,6 +13,9 @@ namespace motionlod::core {
 // The top three rows of an affine 4x4 matrix [A | t]; the last row is (0 0 0 1).
 using Affine34d = Eigen::Matrix<double, 3, 4>;
 using Affine34f = Eigen::Matrix<float, 3, 4>;
+// The same in row-major order: the layout the level file streams (three rows of four), so
+// a level's matrices are written out as they are.
+using RowMajorAffine34f = Eigen::Matrix<float, 3, 4, Eigen::RowMajor>;
 using Vec3f = Eigen::Vector3f;
 using Vec3d = Eigen::Vector3d;
 

@@ -48,13 +48,10 @@ proto::LevelData LevelDataOf(const core::LevelResult& result) {
   level.figures.mean_E = static_cast<float>(errors.mean_e);
   level.figures.max_px_for_1px_error =
       static_cast<float>(core::MaxPixelHeightForBudget(errors.max_vertex_error_pct / 100.0, 1.0));
-  level.matrices.resize(result.matrices.size() * proto::kMatrixFloats);
-  for (size_t q = 0; q < result.matrices.size(); ++q) {
-    // Row-major 3x4: Eigen stores column-major, so copy element by element.
-    for (int row = 0; row < 3; ++row) {
-      for (int col = 0; col < 4; ++col) level.matrices[q * 12 + row * 4 + col] = result.matrices[q](row, col);
-    }
-  }
+  // The level file's row-major 3x4s are the result's own layout.
+  static_assert(sizeof(core::RowMajorAffine34f) == proto::kMatrixFloats * sizeof(float));
+  const float* first = result.matrices.empty() ? nullptr : result.matrices.front().data();
+  level.matrices.assign(first, first + result.matrices.size() * proto::kMatrixFloats);
   return level;
 }
 

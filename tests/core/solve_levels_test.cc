@@ -154,7 +154,7 @@ TEST(SolveLevel, RigidVariantsStoreRotations) {
   const Scene s = MakeScene();
   const auto prepared = Prepare(s, Variant::kVPNOPD);
   const LevelResult result = Solve(*prepared, s, 4);
-  for (const Affine34f& k : result.matrices) {
+  for (const RowMajorAffine34f& k : result.matrices) {
     const Eigen::Matrix3d r = k.leftCols<3>().cast<double>();
     EXPECT_NEAR((r.transpose() * r - Eigen::Matrix3d::Identity()).norm(), 0, 1e-6);
     EXPECT_NEAR(r.determinant(), 1.0, 1e-6);

@@ -72,7 +72,7 @@ SolvedLevel Solve(const std::string& file, int kept, core::Variant variant, int 
     level.joint_names.push_back(name);
   level.kept_joints.assign(level.skeleton.kept_joints.begin(), level.skeleton.kept_joints.end());
   level.joint_map.assign(level.skeleton.joint_to_slot.begin(), level.skeleton.joint_to_slot.end());
-  for (const core::Affine34f& k : result.matrices) {
+  for (const core::RowMajorAffine34f& k : result.matrices) {
     for (int row = 0; row < 3; ++row) {
       for (int col = 0; col < 4; ++col) level.matrices.push_back(k(row, col));
     }

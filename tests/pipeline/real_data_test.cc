@@ -157,7 +157,7 @@ TEST_F(RealData, RigidVariantsStoreRotationsAndReSolvedTranslationHelps) {
   for (int kept : {30, 15, 6}) {
     const auto r = prepared->SolveLevel(Level(s, kept));
     ASSERT_TRUE(r.ok());
-    for (const core::Affine34f& k : r->matrices) {
+    for (const core::RowMajorAffine34f& k : r->matrices) {
       const Eigen::Matrix3d rot = k.leftCols<3>().cast<double>();
       ASSERT_NEAR((rot.transpose() * rot - Eigen::Matrix3d::Identity()).norm(), 0, 1e-5);
       ASSERT_NEAR(rot.determinant(), 1.0, 1e-5);
@@ -423,8 +423,9 @@ TEST_F(RealData, EveryNthFrameSolvesTheFullMotionsProblemOnItsFrames) {
           for (int t = 0; t < every_third.frame_count(); ++t) {
             const int source = t * kStride;
             for (int slot = 0; slot < kept; ++slot) {
-              const core::Affine34f& ka = a->matrices[static_cast<size_t>(source) * kept + slot];
-              const core::Affine34f& kb = b->matrices[static_cast<size_t>(t) * kept + slot];
+              const core::RowMajorAffine34f& ka =
+                  a->matrices[static_cast<size_t>(source) * kept + slot];
+              const core::RowMajorAffine34f& kb = b->matrices[static_cast<size_t>(t) * kept + slot];
               EXPECT_LE((ka - kb).norm(), 1e-5f * (1 + ka.norm())) << where << " frame " << source;
             }
             EXPECT_NEAR(b->optimized.e[t], a->optimized.e[source],
