@@ -1,10 +1,10 @@
 #include "core/polar.h"
 
-#include <algorithm>
-#include <cmath>
-
 #include <Eigen/LU>
 #include <Eigen/SVD>
+#include <algorithm>
+#include <cmath>
+#include <vector>
 
 #include "base/simd.h"
 
@@ -42,15 +42,22 @@ inline void Gram(const double (&x)[9][kLanes], double (&g)[6][kLanes],
 }  // namespace
 
 void NearestRotations(std::span<Eigen::Matrix3d> matrices) {
+  std::vector<double*> blocks(matrices.size());
+  for (size_t i = 0; i < matrices.size(); ++i) blocks[i] = matrices[i].data();
+  NearestRotations(blocks, 3);
+}
+
+void NearestRotations(std::span<double* const> blocks, std::ptrdiff_t column_stride) {
   RunWithWidestSimd([&] {
     const Eigen::Matrix3d identity = Eigen::Matrix3d::Identity();
-    for (size_t first = 0; first < matrices.size(); first += kLanes) {
-      const int lanes = static_cast<int>(std::min<size_t>(kLanes, matrices.size() - first));
-      // x[3 c + r][lane]: coefficient (r, c) of each lane's iterate, column-major as Eigen.
+    // Coefficient q = 3 c + r of a block, column-major as Eigen.
+    const auto at = [column_stride](int q) { return q % 3 + q / 3 * column_stride; };
+    for (size_t first = 0; first < blocks.size(); first += kLanes) {
+      const int lanes = static_cast<int>(std::min<size_t>(kLanes, blocks.size() - first));
+      // x[3 c + r][lane]: coefficient (r, c) of each lane's iterate.
       double x[9][kLanes];
       for (int l = 0; l < kLanes; ++l) {
-        const Eigen::Matrix3d& a = l < lanes ? matrices[first + l] : identity;
-        for (int q = 0; q < 9; ++q) x[q][l] = a(q);
+        for (int q = 0; q < 9; ++q) x[q][l] = l < lanes ? blocks[first + l][at(q)] : identity(q);
       }
       // Each lane starts from a unit mean squared singular value: the polar factor is scale
       // invariant and both iterations below converge fastest near the orthonormal set. (The
@@ -137,11 +144,14 @@ void NearestRotations(std::span<Eigen::Matrix3d> matrices) {
         if (largest_error_squared < 1e-13) break;
       }
       for (int l = 0; l < lanes; ++l) {
-        Eigen::Matrix3d& m = matrices[first + l];
+        double* block = blocks[first + l];
         if (alone[l]) {
+          Eigen::Matrix3d m;
+          for (int q = 0; q < 9; ++q) m(q) = block[at(q)];
           m = norm_squared[l] > 0 ? NearestRotationSvd(m) : identity;
+          for (int q = 0; q < 9; ++q) block[at(q)] = m(q);
         } else {
-          for (int q = 0; q < 9; ++q) m(q) = x[q][l];
+          for (int q = 0; q < 9; ++q) block[at(q)] = x[q][l];
         }
       }
     }

@@ -2,9 +2,9 @@
 // Frobenius norm, det(R) = +1 (a rotation, never a reflection).
 #pragma once
 
-#include <span>
-
 #include <Eigen/Core>
+#include <cstddef>
+#include <span>
 
 namespace motionlod::core {
 
@@ -21,6 +21,11 @@ Eigen::Matrix3d NearestRotation(const Eigen::Matrix3d& a);
 // result does not depend on its batch beyond rounding: a batch steps until all of its
 // matrices have converged, and a converged matrix's further steps are the identity's.
 void NearestRotations(std::span<Eigen::Matrix3d> matrices);
+// The same for 3x3 blocks where they lie: block i's coefficient (r, c) is at
+// blocks[i][r + c * column_stride] (a 3x3 block of a larger column-major matrix with that
+// many rows, or a Matrix3d's own with 3), so that a solution's blocks need no copies in
+// and out.
+void NearestRotations(std::span<double* const> blocks, std::ptrdiff_t column_stride);
 
 // The SVD path alone: R = U diag(1, 1, det(U V^T)) V^T. The reference for tests.
 Eigen::Matrix3d NearestRotationSvd(const Eigen::Matrix3d& a);

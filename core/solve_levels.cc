@@ -1475,16 +1475,13 @@ StatusOr<VariantSolution> SolveVariant(const PreparedMotion::Impl& d, const Redu
 
     if (IsRigid(d.settings.variant)) {
       // x holds each K'^T: the polar factor of a transpose is the transpose of the factor.
-      std::vector<Eigen::Matrix3d> rotations(static_cast<size_t>(d.frames) * m);
+      // Projected where they are, frame by frame.
+      std::vector<double*> rotations(static_cast<size_t>(d.frames) * m);
       for (int t = 0; t < d.frames; ++t) {
         for (int s = 0; s < m; ++s)
-          rotations[static_cast<size_t>(t) * m + s] = x.block<3, 3>(4 * s, 3 * t);
+          rotations[static_cast<size_t>(t) * m + s] = x.data() + 3 * t * x.rows() + 4 * s;
       }
-      NearestRotations(rotations);
-      for (int t = 0; t < d.frames; ++t) {
-        for (int s = 0; s < m; ++s)
-          x.block<3, 3>(4 * s, 3 * t) = rotations[static_cast<size_t>(t) * m + s];
-      }
+      NearestRotations(rotations, x.rows());
       if (d.settings.resolve_rigid_translation) {
         // x_T = G_TT^-1 (b_T - G_TN x_N): translations are rows 4s+3, the rest is fixed.
         // The right-hand sides transposed, as SolveTransposed takes them: b_T^T - x_N^T G_TN^T.

@@ -92,6 +92,34 @@ TEST(NearestRotation, BatchesAgreeWithOneAtATime) {
   }
 }
 
+TEST(NearestRotations, ProjectsBlocksWhereTheyLie) {
+  // Four 3x3 blocks of an 8x6 column-major matrix (rows 0 and 4, columns 0 and 3): each
+  // projected in place as NearestRotation projects it alone, every other entry untouched.
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> value(-1.0, 1.0);
+  Eigen::MatrixXd grid(8, 6);
+  for (Eigen::Index q = 0; q < grid.size(); ++q) grid(q) = value(rng);
+  for (int s = 0; s < 2; ++s) {
+    for (int t = 0; t < 2; ++t) grid.block<3, 3>(4 * s, 3 * t) += 2 * Eigen::Matrix3d::Identity();
+  }
+  const Eigen::MatrixXd before = grid;
+  std::vector<double*> blocks;
+  for (int t = 0; t < 2; ++t) {
+    for (int s = 0; s < 2; ++s) blocks.push_back(grid.data() + 3 * t * grid.rows() + 4 * s);
+  }
+  NearestRotations(blocks, grid.rows());
+  Eigen::MatrixXd expected = before;
+  for (int s = 0; s < 2; ++s) {
+    for (int t = 0; t < 2; ++t) {
+      expected.block<3, 3>(4 * s, 3 * t) = NearestRotation(before.block<3, 3>(4 * s, 3 * t));
+    }
+  }
+  EXPECT_LE((grid - expected).norm(), 1e-12);
+  for (int t = 0; t < 6; ++t) EXPECT_EQ(grid(3, t), before(3, t)) << t;
+  for (int t = 0; t < 6; ++t) EXPECT_EQ(grid(7, t), before(7, t)) << t;
+  EXPECT_NE(grid(0, 0), before(0, 0));
+}
+
 TEST(NearestRotation, HandlesReflectionsScaleAndZero) {
   const Eigen::Matrix3d mirror = Eigen::Vector3d(1, 1, -1).asDiagonal();
   EXPECT_NEAR(NearestRotation(mirror).determinant(), 1.0, 1e-12);
