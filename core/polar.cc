@@ -1,10 +1,11 @@
 #include "core/polar.h"
 
-#include <Eigen/LU>
-#include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
 #include <vector>
+
+#include <Eigen/LU>
+#include <Eigen/SVD>
 
 #include "base/simd.h"
 

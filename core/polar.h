@@ -2,9 +2,10 @@
 // Frobenius norm, det(R) = +1 (a rotation, never a reflection).
 #pragma once
 
-#include <Eigen/Core>
 #include <cstddef>
 #include <span>
+
+#include <Eigen/Core>
 
 namespace motionlod::core {
 
