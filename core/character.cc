@@ -8,23 +8,14 @@
 #include <tuple>
 #include <unordered_set>
 
+#include "base/lanes.h"
+
 namespace motionlod::core {
 namespace {
 
 // Eigen's allFinite() was an out-of-line call per vector here.
 bool IsFinite(const Vec3f& v) {
   return std::isfinite(v.x()) && std::isfinite(v.y()) && std::isfinite(v.z());
-}
-
-typedef double Lanes2 __attribute__((vector_size(2 * sizeof(double))));
-typedef double UnalignedLanes2
-    __attribute__((vector_size(2 * sizeof(double)), aligned(alignof(double)), may_alias));
-inline UnalignedLanes2* AsLanes2(double* x) { return reinterpret_cast<UnalignedLanes2*>(x); }
-typedef float Lanes4f __attribute__((vector_size(4 * sizeof(float))));
-typedef float UnalignedLanes4f
-    __attribute__((vector_size(4 * sizeof(float)), aligned(alignof(float)), may_alias));
-inline const UnalignedLanes4f* AsLanes4f(const float* x) {
-  return reinterpret_cast<const UnalignedLanes4f*>(x);
 }
 
 std::string JointLabel(const RawSkeleton& s, int j) {

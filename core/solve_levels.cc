@@ -8,6 +8,7 @@
 #include <tuple>
 
 #include "base/hash.h"
+#include "base/lanes.h"
 #include "base/simd.h"
 #include "core/block_cholesky.h"
 #include "core/chord_angle.h"
@@ -23,23 +24,6 @@ using PaddedDelta = Eigen::Matrix4f;
 
 namespace {
 
-// Four doubles as one vector (GCC's vector extensions): one 256-bit register in the AVX2
-// version (base/simd.h), two 128-bit ones in the baseline.
-typedef double Lanes4 __attribute__((vector_size(4 * sizeof(double))));
-// Four contiguous doubles at any address read as one vector: one unaligned load each. (A
-// memcpy of several into an array of Lanes4 went through the stack in 16-byte halves,
-// and each 32-byte read of them then waited for the two stores to retire.)
-typedef double UnalignedLanes4
-    __attribute__((vector_size(4 * sizeof(double)), aligned(alignof(double)), may_alias));
-inline const UnalignedLanes4* AsLanes4(const double* x) {
-  return reinterpret_cast<const UnalignedLanes4*>(x);
-}
-inline UnalignedLanes4* AsLanes4(double* x) { return reinterpret_cast<UnalignedLanes4*>(x); }
-// Four floats, and their unaligned stores.
-typedef float Lanes4f __attribute__((vector_size(4 * sizeof(float))));
-typedef float UnalignedLanes4f
-    __attribute__((vector_size(4 * sizeof(float)), aligned(alignof(float)), may_alias));
-inline UnalignedLanes4f* AsLanes4f(float* x) { return reinterpret_cast<UnalignedLanes4f*>(x); }
 // The rows of a 4x4 whose columns are x[0..3]: row a holds lane a of each, in order.
 // Unpacks within 128-bit halves, then a swap of halves: no lane-crossing shuffle per
 // element.
@@ -53,14 +37,6 @@ inline void Transpose4(const Lanes4 x[4], Lanes4 rows[4]) {
   rows[2] = __builtin_shufflevector(even01, even23, 2, 3, 6, 7);
   rows[3] = __builtin_shufflevector(odd01, odd23, 2, 3, 6, 7);
 }
-// The same for eight floats.
-typedef float Lanes8f __attribute__((vector_size(8 * sizeof(float))));
-typedef float UnalignedLanes8f
-    __attribute__((vector_size(8 * sizeof(float)), aligned(alignof(float)), may_alias));
-inline const UnalignedLanes8f* AsLanes8f(const float* x) {
-  return reinterpret_cast<const UnalignedLanes8f*>(x);
-}
-
 // Adds tr(A^T Cp B) and tr(A^T Cn B), lane by lane, to p and n (each sums to its trace): A
 // and B are 4x3 blocks of column-major matrices with `stride` rows (4 contiguous rows per
 // column), Cp and Cn 4x4 (Cn a 3x3 padded with zeros, which leaves the translation rows

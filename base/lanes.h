@@ -1,0 +1,39 @@
+// Short vectors of doubles and floats for the hot loops (GCC's and clang's vector
+// extensions): Lanes4 and Lanes8f are one 256-bit register each in the AVX2 version
+// (base/simd.h), two 128-bit ones in the baseline; Lanes2 and Lanes4f one 128-bit register.
+// The Unaligned types read or write that many contiguous elements at any address, one
+// unaligned load or store each, through AsLanes*. (A memcpy of several into an array of
+// vectors went through the stack in 16-byte halves, and each 32-byte read of them then
+// waited for the two stores to retire.)
+#pragma once
+
+namespace motionlod {
+
+typedef double Lanes2 __attribute__((vector_size(2 * sizeof(double))));
+typedef double Lanes4 __attribute__((vector_size(4 * sizeof(double))));
+typedef float Lanes4f __attribute__((vector_size(4 * sizeof(float))));
+typedef float Lanes8f __attribute__((vector_size(8 * sizeof(float))));
+
+typedef double UnalignedLanes2
+    __attribute__((vector_size(2 * sizeof(double)), aligned(alignof(double)), may_alias));
+typedef double UnalignedLanes4
+    __attribute__((vector_size(4 * sizeof(double)), aligned(alignof(double)), may_alias));
+typedef float UnalignedLanes4f
+    __attribute__((vector_size(4 * sizeof(float)), aligned(alignof(float)), may_alias));
+typedef float UnalignedLanes8f
+    __attribute__((vector_size(8 * sizeof(float)), aligned(alignof(float)), may_alias));
+
+inline UnalignedLanes2* AsLanes2(double* x) { return reinterpret_cast<UnalignedLanes2*>(x); }
+inline const UnalignedLanes4* AsLanes4(const double* x) {
+  return reinterpret_cast<const UnalignedLanes4*>(x);
+}
+inline UnalignedLanes4* AsLanes4(double* x) { return reinterpret_cast<UnalignedLanes4*>(x); }
+inline const UnalignedLanes4f* AsLanes4f(const float* x) {
+  return reinterpret_cast<const UnalignedLanes4f*>(x);
+}
+inline UnalignedLanes4f* AsLanes4f(float* x) { return reinterpret_cast<UnalignedLanes4f*>(x); }
+inline const UnalignedLanes8f* AsLanes8f(const float* x) {
+  return reinterpret_cast<const UnalignedLanes8f*>(x);
+}
+
+}  // namespace motionlod
