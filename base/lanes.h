@@ -4,7 +4,8 @@
 // The Unaligned types read or write that many contiguous elements at any address, one
 // unaligned load or store each, through AsLanes*. (A memcpy of several into an array of
 // vectors went through the stack in 16-byte halves, and each 32-byte read of them then
-// waited for the two stores to retire.)
+// waited for the two stores to retire.) Transpose4 turns four Lanes4 into lanes of each
+// other in registers.
 #pragma once
 
 namespace motionlod {
@@ -36,4 +37,17 @@ inline const UnalignedLanes8f* AsLanes8f(const float* x) {
   return reinterpret_cast<const UnalignedLanes8f*>(x);
 }
 
+// The rows of a 4x4 whose columns are x[0..3]: row a holds lane a of each, in order.
+// Unpacks within 128-bit halves, then a swap of halves: no lane-crossing shuffle per
+// element.
+inline void Transpose4(const Lanes4 x[4], Lanes4 rows[4]) {
+  const Lanes4 even01 = __builtin_shufflevector(x[0], x[1], 0, 4, 2, 6);
+  const Lanes4 odd01 = __builtin_shufflevector(x[0], x[1], 1, 5, 3, 7);
+  const Lanes4 even23 = __builtin_shufflevector(x[2], x[3], 0, 4, 2, 6);
+  const Lanes4 odd23 = __builtin_shufflevector(x[2], x[3], 1, 5, 3, 7);
+  rows[0] = __builtin_shufflevector(even01, even23, 0, 1, 4, 5);
+  rows[1] = __builtin_shufflevector(odd01, odd23, 0, 1, 4, 5);
+  rows[2] = __builtin_shufflevector(even01, even23, 2, 3, 6, 7);
+  rows[3] = __builtin_shufflevector(odd01, odd23, 2, 3, 6, 7);
+}
 }  // namespace motionlod

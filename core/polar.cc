@@ -2,11 +2,11 @@
 
 #include <algorithm>
 #include <cmath>
-#include <vector>
 
 #include <Eigen/LU>
 #include <Eigen/SVD>
 
+#include "base/lanes.h"
 #include "base/simd.h"
 
 namespace motionlod::core {
@@ -23,10 +23,9 @@ namespace {
 
 constexpr int kLanes = 8;
 
-// X^T X's six distinct entries (00, 11, 22, 01, 02, 12) and e^2 = |X^T X - I|_F^2 for
-// NearestRotations' lanes (x[3 c + r][lane]: coefficient (r, c)).
-inline void Gram(const double (&x)[9][kLanes], double (&g)[6][kLanes],
-                 double (&error_squared)[kLanes]) {
+// X^T X's six distinct entries (00, 11, 22, 01, 02, 12) for NearestRotations' lanes
+// (x[3 c + r][lane]: coefficient (r, c)).
+inline void Gram(const double (&x)[9][kLanes], double (&g)[6][kLanes]) {
   for (int l = 0; l < kLanes; ++l) {
     g[0][l] = x[0][l] * x[0][l] + x[1][l] * x[1][l] + x[2][l] * x[2][l];
     g[1][l] = x[3][l] * x[3][l] + x[4][l] * x[4][l] + x[5][l] * x[5][l];
@@ -34,31 +33,56 @@ inline void Gram(const double (&x)[9][kLanes], double (&g)[6][kLanes],
     g[3][l] = x[0][l] * x[3][l] + x[1][l] * x[4][l] + x[2][l] * x[5][l];
     g[4][l] = x[0][l] * x[6][l] + x[1][l] * x[7][l] + x[2][l] * x[8][l];
     g[5][l] = x[3][l] * x[6][l] + x[4][l] * x[7][l] + x[5][l] * x[8][l];
+  }
+}
+
+// e^2 = |X^T X - I|_F^2 of each lane from its Gram entries, and the largest.
+inline double ErrorsSquared(const double (&g)[6][kLanes], double (&error_squared)[kLanes]) {
+  for (int l = 0; l < kLanes; ++l) {
     error_squared[l] = (g[0][l] - 1) * (g[0][l] - 1) + (g[1][l] - 1) * (g[1][l] - 1) +
                        (g[2][l] - 1) * (g[2][l] - 1) +
                        2 * (g[3][l] * g[3][l] + g[4][l] * g[4][l] + g[5][l] * g[5][l]);
   }
+  double largest = error_squared[0];
+  for (int l = 1; l < kLanes; ++l) largest = std::max(largest, error_squared[l]);
+  return largest;
+}
+
+// The Newton-Schulz steps that take a batch whose largest error is sqrt(error_squared) <=
+// 1/2 below 1e-13: a step maps each eigenvalue 1 + d of X^T X to 1 - d^2 (3 - d) / 4, so
+// the next error is at most e^2 (3 + e) / 4. Counted from that bound, the batch steps
+// without measuring its errors again.
+inline int NewtonSchulzSteps(double error_squared) {
+  double error = std::sqrt(error_squared);
+  int steps = 1;
+  for (; error * error >= 1e-13; ++steps) error = error * error * (3 + error) / 4;
+  return steps;
 }
 
 }  // namespace
 
-void NearestRotations(std::span<Eigen::Matrix3d> matrices) {
-  std::vector<double*> blocks(matrices.size());
-  for (size_t i = 0; i < matrices.size(); ++i) blocks[i] = matrices[i].data();
-  NearestRotations(blocks, 3);
-}
-
 void NearestRotations(std::span<double* const> blocks, std::ptrdiff_t column_stride) {
   RunWithWidestSimd([&] {
     const Eigen::Matrix3d identity = Eigen::Matrix3d::Identity();
-    // Coefficient q = 3 c + r of a block, column-major as Eigen.
-    const auto at = [column_stride](int q) { return q % 3 + q / 3 * column_stride; };
     for (size_t first = 0; first < blocks.size(); first += kLanes) {
       const int lanes = static_cast<int>(std::min<size_t>(kLanes, blocks.size() - first));
-      // x[3 c + r][lane]: coefficient (r, c) of each lane's iterate.
-      double x[9][kLanes];
-      for (int l = 0; l < kLanes; ++l) {
-        for (int q = 0; q < 9; ++q) x[q][l] = l < lanes ? blocks[first + l][at(q)] : identity(q);
+      // x[3 c + r][lane]: coefficient (r, c) of each lane's iterate; fourth[c][lane]: row 3
+      // of column c, put back as it was. Each column of four blocks is read as four vectors
+      // and transposed into lanes, and written back the same way (element by element, every
+      // vector read of x waited for the scalar stores it spans to retire). Lanes past the
+      // last block repeat the first block of the batch, whose steps they then match.
+      alignas(32) double x[9][kLanes];
+      alignas(32) double fourth[3][kLanes];
+      for (int half = 0; half < kLanes; half += 4) {
+        const double* source[4];
+        for (int j = 0; j < 4; ++j) source[j] = blocks[first + (half + j < lanes ? half + j : 0)];
+        for (int c = 0; c < 3; ++c) {
+          Lanes4 column[4], rows[4];
+          for (int j = 0; j < 4; ++j) column[j] = *AsLanes4(source[j] + c * column_stride);
+          Transpose4(column, rows);
+          for (int r = 0; r < 3; ++r) *AsLanes4(&x[3 * c + r][half]) = rows[r];
+          *AsLanes4(&fourth[c][half]) = rows[3];
+        }
       }
       // Each lane starts from a unit mean squared singular value: the polar factor is scale
       // invariant and both iterations below converge fastest near the orthonormal set. (The
@@ -78,25 +102,33 @@ void NearestRotations(std::span<double* const> blocks, std::ptrdiff_t column_str
       // when det < 0) and a condition number it can recover from in a few steps: a lane
       // without them goes alone, to the SVD.
       bool alone[kLanes];
+      bool any_alone = false;
       for (int l = 0; l < kLanes; ++l) {
         const double norm = std::sqrt(norm_squared[l]);
         alone[l] = !(norm_squared[l] > 0) || !(determinant[l] > 1e-6 * norm * norm_squared[l]);
+        any_alone = any_alone || alone[l];
+      }
+      for (int l = 0; any_alone && l < kLanes; ++l) {
         if (alone[l]) {
           for (int q = 0; q < 9; ++q) x[q][l] = identity(q);
         }
       }
       double g[6][kLanes];  // X^T X: 00, 11, 22, 01, 02, 12
       double error_squared[kLanes];
+      double largest_error_squared = 0;
+      int steps_left = 0;  // once every lane is near: the Newton-Schulz steps still to take
       for (int iteration = 0; iteration < 30; ++iteration) {
-        Gram(x, g, error_squared);
-        const double largest_error_squared =
-            *std::max_element(error_squared, error_squared + kLanes);
-        if (largest_error_squared < 1e-26) break;
+        Gram(x, g);
+        if (steps_left == 0) {
+          largest_error_squared = ErrorsSquared(g, error_squared);
+          if (largest_error_squared < 1e-26) break;
+          if (largest_error_squared < 0.25) steps_left = NewtonSchulzSteps(largest_error_squared);
+        }
         // A lane still far from orthonormal (a tenth of a rigid every-level bake's matrices
         // start there) takes a scaled Newton step (Higham) instead of Newton-Schulz:
         // X <- (zeta X + X^-T / zeta) / 2, zeta = sqrt(|X^-1| / |X|) speeding the first
         // steps, X^-T the cofactors over the determinant.
-        const bool any_far = largest_error_squared >= 0.25;
+        const bool any_far = steps_left == 0;
         double newton[9][kLanes];
         if (any_far) {
           for (int l = 0; l < kLanes; ++l) {
@@ -140,19 +172,26 @@ void NearestRotations(std::span<double* const> blocks, std::ptrdiff_t column_str
             for (int q = 0; q < 9; ++q) x[q][l] = far ? newton[q][l] : x[q][l];
           }
         }
-        // The step maps each eigenvalue 1 + d of X^T X to 1 - d^2 (3 - d) / 4, so for
-        // e <= 1/2 the next error is at most e^2: below 1e-13 here, no need to check it.
-        if (largest_error_squared < 1e-13) break;
+        if (steps_left > 0 && --steps_left == 0) break;
       }
-      for (int l = 0; l < lanes; ++l) {
-        double* block = blocks[first + l];
-        if (alone[l]) {
-          Eigen::Matrix3d m;
-          for (int q = 0; q < 9; ++q) m(q) = block[at(q)];
-          m = norm_squared[l] > 0 ? NearestRotationSvd(m) : identity;
-          for (int q = 0; q < 9; ++q) block[at(q)] = m(q);
-        } else {
-          for (int q = 0; q < 9; ++q) block[at(q)] = x[q][l];
+      for (int l = 0; any_alone && l < lanes; ++l) {
+        if (!alone[l]) continue;
+        const double* block = blocks[first + l];
+        Eigen::Matrix3d m;
+        for (int c = 0; c < 3; ++c) {
+          for (int r = 0; r < 3; ++r) m(r, c) = block[r + c * column_stride];
+        }
+        m = norm_squared[l] > 0 ? NearestRotationSvd(m) : identity;
+        for (int q = 0; q < 9; ++q) x[q][l] = m(q);
+      }
+      for (int half = 0; half < lanes; half += 4) {
+        for (int c = 0; c < 3; ++c) {
+          Lanes4 rows[4], column[4];
+          for (int r = 0; r < 3; ++r) rows[r] = *AsLanes4(&x[3 * c + r][half]);
+          rows[3] = *AsLanes4(&fourth[c][half]);
+          Transpose4(rows, column);
+          for (int j = 0; j < 4 && half + j < lanes; ++j)
+            *AsLanes4(blocks[first + half + j] + c * column_stride) = column[j];
         }
       }
     }
@@ -160,9 +199,11 @@ void NearestRotations(std::span<double* const> blocks, std::ptrdiff_t column_str
 }
 
 Eigen::Matrix3d NearestRotation(const Eigen::Matrix3d& a) {
-  Eigen::Matrix3d r = a;
-  NearestRotations(std::span<Eigen::Matrix3d>(&r, 1));
-  return r;
+  Eigen::Matrix<double, 4, 3> block = Eigen::Matrix<double, 4, 3>::Zero();
+  block.topRows<3>() = a;
+  double* const data = block.data();
+  NearestRotations(std::span<double* const>(&data, 1), 4);
+  return block.topRows<3>();
 }
 
 }  // namespace motionlod::core

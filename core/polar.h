@@ -16,16 +16,15 @@ namespace motionlod::core {
 // NearestRotations.
 Eigen::Matrix3d NearestRotation(const Eigen::Matrix3d& a);
 
-// NearestRotation of each matrix, in place, several at a time: the steps of eight matrices
-// interleave in one vectorised loop instead of waiting on each other's latency (the rigid
-// variants project m x T matrices per level); a matrix for the SVD goes alone. A matrix's
-// result does not depend on its batch beyond rounding: a batch steps until all of its
-// matrices have converged, and a converged matrix's further steps are the identity's.
-void NearestRotations(std::span<Eigen::Matrix3d> matrices);
-// The same for 3x3 blocks where they lie: block i's coefficient (r, c) is at
-// blocks[i][r + c * column_stride] (a 3x3 block of a larger column-major matrix with that
-// many rows, or a Matrix3d's own with 3), so that a solution's blocks need no copies in
-// and out.
+// NearestRotation of many 3x3 blocks where they lie, several at a time: the steps of eight
+// matrices interleave in one vectorised loop instead of waiting on each other's latency
+// (the rigid variants project m x T matrices per level); a matrix for the SVD goes alone.
+// Block i is the top 3x3 of a column-major 4x3 at blocks[i], coefficient (r, c) at
+// blocks[i][r + c * column_stride] (column_stride >= 4: a 4x3 block of a larger matrix,
+// as a solution's K'^T with its translation row, or a Matrix<double, 4, 3> with 4). Its
+// columns are read and written whole: row 3 is put back as it was. A matrix's result does
+// not depend on its batch beyond rounding: a batch steps until all of its matrices have
+// converged, and a converged matrix's further steps are the identity's.
 void NearestRotations(std::span<double* const> blocks, std::ptrdiff_t column_stride);
 
 // The SVD path alone: R = U diag(1, 1, det(U V^T)) V^T. The reference for tests.

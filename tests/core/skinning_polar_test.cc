@@ -82,13 +82,22 @@ TEST(NearestRotation, BatchesAgreeWithOneAtATime) {
   // Ill-conditioned, yet not for the SVD: scaled Newton steps in one lane (Newton-Schulz
   // alone would not converge within its steps) beside its batch's near-rotations.
   matrices[12] = matrices[13] * Eigen::Vector3d(1, 1, 2e-5).asDiagonal();
-  std::vector<Eigen::Matrix3d> batched = matrices;
-  NearestRotations(batched);
+  // Each in a 4x3 block whose fourth row the projection leaves as it was.
+  std::vector<Eigen::Matrix<double, 4, 3>> batched(matrices.size());
+  std::vector<double*> blocks;
+  for (size_t q = 0; q < matrices.size(); ++q) {
+    batched[q].topRows<3>() = matrices[q];
+    batched[q].row(3) = Eigen::RowVector3d(0.5, -1.0, static_cast<double>(q));
+    blocks.push_back(batched[q].data());
+  }
+  NearestRotations(blocks, 4);
   for (size_t q = 0; q < matrices.size(); ++q) {
     const Eigen::Matrix3d expected = NearestRotation(matrices[q]);
-    EXPECT_LE((batched[q] - expected).norm(), 1e-12) << q << "\n" << matrices[q];
-    EXPECT_NEAR((batched[q].transpose() * batched[q] - Eigen::Matrix3d::Identity()).norm(), 0, 1e-12) << q;
-    EXPECT_NEAR(batched[q].determinant(), 1.0, 1e-12) << q;
+    const Eigen::Matrix3d r = batched[q].topRows<3>();
+    EXPECT_LE((r - expected).norm(), 1e-12) << q << "\n" << matrices[q];
+    EXPECT_NEAR((r.transpose() * r - Eigen::Matrix3d::Identity()).norm(), 0, 1e-12) << q;
+    EXPECT_NEAR(r.determinant(), 1.0, 1e-12) << q;
+    EXPECT_EQ(batched[q].row(3), Eigen::RowVector3d(0.5, -1.0, static_cast<double>(q))) << q;
   }
 }
 
