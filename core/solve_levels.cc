@@ -1478,27 +1478,62 @@ StatusOr<VariantSolution> SolveVariant(const PreparedMotion::Impl& d, const Redu
           }
         }
         BlockSymmetric<1> g_tt(m);
-        MatrixXd x_tt(cols, m);
-        // One pass over the frames for the three coefficients (three Eigen column updates
-        // cost more in calls than in arithmetic on short motions).
-        const auto subtract_g_tn = [&](int s, int u, const Eigen::Matrix4d& g_su) {
-          double* __restrict target = x_tt.col(s).data();
-          const double* x0 = x_nt.col(3 * u).data();
-          const double* x1 = x_nt.col(3 * u + 1).data();
-          const double* x2 = x_nt.col(3 * u + 2).data();
-          const double g0 = g_su(3, 0), g1 = g_su(3, 1), g2 = g_su(3, 2);
-          for (int col = 0; col < cols; ++col)
-            target[col] -= g0 * x0[col] + g1 * x1[col] + g2 * x2[col];
+        // Row s of G_TN as its couplings to the slots u of its blocks (G_su(3, 0..2): the
+        // diagonal block first, then the others in G's order), so that each slot's
+        // right-hand sides are summed in registers, eight frames' columns at a time, and
+        // stored once (a pass over the blocks read and wrote every right-hand side once per
+        // block).
+        struct Coupling {
+          int u;
+          double g[3];
         };
+        std::vector<int> coupling_offsets(m + 1, 0);
+        for (const auto& block : g.lower()) {
+          ++coupling_offsets[block.row + 1];
+          ++coupling_offsets[block.col + 1];
+        }
+        for (int s = 0; s < m; ++s) coupling_offsets[s + 1] += coupling_offsets[s] + 1;
+        std::vector<Coupling> couplings(coupling_offsets[m]);
+        std::vector<int> filled(coupling_offsets.begin(), coupling_offsets.end() - 1);
         for (int s = 0; s < m; ++s) {
-          x_tt.col(s) = bt.col(4 * s + 3);
-          g_tt.AddDiagonal(s, g.diagonal(s).bottomRightCorner<1, 1>());
-          subtract_g_tn(s, s, g.diagonal(s));
+          const Eigen::Matrix4d& g_ss = g.diagonal(s);
+          couplings[filled[s]++] = {s, {g_ss(3, 0), g_ss(3, 1), g_ss(3, 2)}};
+          g_tt.AddDiagonal(s, g_ss.bottomRightCorner<1, 1>());
         }
         for (const auto& block : g.lower()) {  // G(row, col) and its transpose G(col, row)
-          g_tt.AddPair(block.row, block.col, block.value.bottomRightCorner<1, 1>());
-          subtract_g_tn(block.row, block.col, block.value);
-          subtract_g_tn(block.col, block.row, block.value.transpose());
+          const Eigen::Matrix4d& v = block.value;
+          g_tt.AddPair(block.row, block.col, v.bottomRightCorner<1, 1>());
+          couplings[filled[block.row]++] = {block.col, {v(3, 0), v(3, 1), v(3, 2)}};
+          couplings[filled[block.col]++] = {block.row, {v(0, 3), v(1, 3), v(2, 3)}};
+        }
+        MatrixXd x_tt(cols, m);
+        for (int s = 0; s < m; ++s) {
+          const Coupling* begin = couplings.data() + coupling_offsets[s];
+          const Coupling* end = couplings.data() + coupling_offsets[s + 1];
+          const double* b = bt.col(4 * s + 3).data();
+          double* target = x_tt.col(s).data();
+          int col = 0;
+          for (; col + 8 <= cols; col += 8) {
+            Lanes4 sum0 = *AsLanes4(b + col), sum1 = *AsLanes4(b + col + 4);
+            for (const Coupling* c = begin; c != end; ++c) {
+              const double* x0 = nt_data + 3 * c->u * nt_stride + col;
+              const double* x1 = x0 + nt_stride;
+              const double* x2 = x1 + nt_stride;
+              sum0 -= c->g[0] * *AsLanes4(x0) + c->g[1] * *AsLanes4(x1) + c->g[2] * *AsLanes4(x2);
+              sum1 -= c->g[0] * *AsLanes4(x0 + 4) + c->g[1] * *AsLanes4(x1 + 4) +
+                      c->g[2] * *AsLanes4(x2 + 4);
+            }
+            *AsLanes4(target + col) = sum0;
+            *AsLanes4(target + col + 4) = sum1;
+          }
+          for (; col < cols; ++col) {
+            double sum = b[col];
+            for (const Coupling* c = begin; c != end; ++c) {
+              const double* x0 = nt_data + 3 * c->u * nt_stride + col;
+              sum -= c->g[0] * x0[0] + c->g[1] * x0[nt_stride] + c->g[2] * x0[2 * nt_stride];
+            }
+            target[col] = sum;
+          }
         }
         auto factor = BlockCholesky<1>::Factor(g_tt);
         if (!factor.ok()) return factor.status();
