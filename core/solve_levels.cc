@@ -598,6 +598,7 @@ std::vector<size_t> PreparedMotion::Impl::ActivePairs(const DeltaView& delta) co
   // Pairs with a joint whose Delta is zero in every frame add nothing (every kept joint of
   // a baseline): skip them.
   std::vector<size_t> active;
+  active.reserve(pairs.size());
   for (size_t q = 0; q < pairs.size(); ++q) {
     if (delta.Moves(pairs[q].first) && delta.Moves(pairs[q].second)) active.push_back(q);
   }
@@ -614,12 +615,14 @@ void PreparedMotion::Impl::EvaluateErrors(const DeltaView& delta, const std::vec
     // removed ones of a baseline); the others' blocks of `frame` stay zero.
     std::vector<uint8_t> moving(n, 0);
     std::vector<int> moving_joints;
+    moving_joints.reserve(n);
     for (int k = 0; k < n; ++k) {
       moving[k] = delta.Moves(k);
       if (moving[k]) moving_joints.push_back(k);
     }
     const bool moves = !moving_joints.empty();
     std::vector<int> moving_kept;
+    moving_kept.reserve(kept.size());
     for (int j : kept) {
       if (moving[j]) moving_kept.push_back(j);
     }
@@ -709,6 +712,10 @@ std::optional<PreparedMotion::Impl::KeptForms> PreparedMotion::Impl::MakeKeptFor
     }
   }
   std::vector<int> index(static_cast<size_t>(m) * m, -1);
+  const size_t slot_pairs_at_most = std::min(pairs.size(), static_cast<size_t>(m) * (m + 1) / 2);
+  forms.slot_pairs.reserve(slot_pairs_at_most);
+  forms.slot_cp.reserve(slot_pairs_at_most);
+  forms.slot_cn.reserve(slot_pairs_at_most);
   for (size_t q = 0; q < pairs.size(); ++q) {
     const int a = forms.slot_of[pairs[q].first], b = forms.slot_of[pairs[q].second];
     const int s = std::min(a, b), u = std::max(a, b);
@@ -941,6 +948,8 @@ PreparedMotion::Impl::MaxSearchBounds PreparedMotion::Impl::MakeMaxSearchBounds(
   const auto& group_influence_offsets = c.group_influence_offsets();
   const auto& group_influences = c.group_influences();
   MaxSearchBounds bounds;
+  bounds.groups.reserve(n);
+  bounds.joints.reserve(n);
   std::vector<uint8_t> weights_a_group(n, 0);
   for (int j = 0; j < n; ++j) {
     if (group_clusters[j] == group_clusters[j + 1] || (group_mask != nullptr && !(*group_mask)[j])) continue;
