@@ -63,6 +63,33 @@ TEST(TaskPool, PiecesRunAtTheSameTime) {
   EXPECT_EQ(met.load(), 2);
 }
 
+// Past their spin, idle threads sleep on the condition variable: a worker idle for far
+// longer than the spin still takes the next job's piece, and a caller whose last piece
+// runs elsewhere for longer than the spin is still woken when it ends.
+TEST(TaskPool, ThreadsPastTheirSpinAreWokenByTheNextChange) {
+  TaskPool pool(2);
+  for (int round = 0; round < 3; ++round) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));  // the worker now sleeps
+    std::atomic<int> started{0};
+    std::atomic<int> met{0};
+    pool.Run(2, [&](int) {
+      ++started;
+      if (WaitFor([&] { return started.load() == 2; })) ++met;
+    });
+    EXPECT_EQ(met.load(), 2) << "round " << round;
+
+    const std::thread::id caller = std::this_thread::get_id();
+    std::atomic<int> finished{0};
+    pool.Run(2, [&](int) {
+      if (std::this_thread::get_id() != caller) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));  // the caller now sleeps
+      }
+      ++finished;
+    });
+    EXPECT_EQ(finished.load(), 2) << "round " << round;
+  }
+}
+
 // The worker runs an outer piece that opens a job of two pieces which wait for each other;
 // the caller, its own pieces handed out, must take the second: a caller that only waited
 // for its own job would leave that job to its one busy owner.
