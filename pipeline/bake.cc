@@ -343,17 +343,46 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
         if (!strided.ok()) return strided.status();
         probe = *std::move(strided);
       }
+      // With several threads, the probes the bisection may make next run beside the one it
+      // makes now: one per thread, the bisection's tree of brackets taken breadth first.
+      // It then decides from every probe made, exactly as one probe at a time would (the
+      // level found does not depend on the threads), a round taking as many steps as the
+      // probes made reach.
+      std::map<int, bool> within_at;  // kept joints -> probe within the bound
       while (lo < hi) {
         if (Cancelled(cancel)) return CancelledStatus();
-        const int mid = lo + (hi - lo) / 2;
-        auto level = core::ReduceSkeletonToCount(*inputs->character, *ranking, mid);
-        if (!level.ok()) return level.status();
-        auto within = probe->MaxVertexErrorWithin(*level, bound);
-        if (!within.ok()) return within.status();
-        if (*within) {
-          hi = mid;
-        } else {
-          lo = mid + 1;
+        std::vector<int> probes;
+        std::vector<std::pair<int, int>> brackets = {{lo, hi}};
+        for (size_t next = 0;
+             next < brackets.size() && probes.size() < static_cast<size_t>(threads); ++next) {
+          const auto [low, high] = brackets[next];
+          if (low >= high) continue;
+          const int mid = low + (high - low) / 2;
+          if (!within_at.count(mid)) probes.push_back(mid);
+          brackets.emplace_back(low, mid);       // mid within the bound
+          brackets.emplace_back(mid + 1, high);  // mid not within it
+        }
+        std::vector<StatusOr<bool>> within(probes.size(), StatusOr<bool>(false));
+        pool.Run(static_cast<int>(probes.size()), [&](int index) {
+          auto level = core::ReduceSkeletonToCount(*inputs->character, *ranking, probes[index]);
+          if (!level.ok()) {
+            within[index] = level.status();
+            return;
+          }
+          within[index] = probe->MaxVertexErrorWithin(*level, bound);
+        });
+        for (size_t index = 0; index < probes.size(); ++index) {
+          if (!within[index].ok()) return within[index].status();
+          within_at[probes[index]] = *within[index];
+        }
+        while (lo < hi) {
+          const auto made = within_at.find(lo + (hi - lo) / 2);
+          if (made == within_at.end()) break;
+          if (made->second) {
+            hi = made->first;
+          } else {
+            lo = made->first + 1;
+          }
         }
       }
     }

@@ -510,6 +510,44 @@ TEST_F(RealData, TheDefaultLadderHoldsTheSmallestUsefulLevel) {
   }
 }
 
+// On several threads the search for the smallest useful level makes several probes at a
+// time (the bisection's next ones, breadth first) and decides from them as one probe at a
+// time would: the ladder, and the level set to the byte, are those of one thread. Fox and
+// Orc land between two ladder levels several counts apart (rounds of two and four probes);
+// 09_11_cmu's probes run on strided frames.
+TEST_F(RealData, TheDefaultLadderDoesNotDependOnTheThreads) {
+  for (const char* file : {"characters/Fox.glb", "characters/Orc.gltf", "motions/09_11_cmu.fbx"}) {
+    for (core::Variant variant : {core::Variant::kVP, core::Variant::kVPNOPD}) {
+      auto asset = io::LoadAssetFile(DataPath(file));
+      ASSERT_TRUE(asset.ok()) << file;
+      BakeRequest request;
+      request.character = *asset;
+      request.settings.variant = variant;
+      request.measure_skinning_pass = false;
+      std::string one_thread_bytes;
+      std::vector<int> one_thread_ladder;
+      for (int threads : {1, 2, 4}) {
+        request.threads = threads;
+        auto output = Bake(request);
+        ASSERT_TRUE(output.ok()) << file << ": " << output.status().ToString();
+        std::vector<int> ladder;
+        for (const nlohmann::json& level : output->report["levels"]) {
+          ladder.push_back(level["joints"].get<int>());
+        }
+        if (threads == 1) {
+          ASSERT_EQ(ladder.size(), 5u) << file << ": the search added a level";
+          one_thread_bytes = output->level_set;
+          one_thread_ladder = ladder;
+          continue;
+        }
+        EXPECT_EQ(ladder, one_thread_ladder) << file << " " << core::VariantName(variant) << " " << threads;
+        EXPECT_TRUE(output->level_set == one_thread_bytes)
+            << file << " " << core::VariantName(variant) << " " << threads;
+      }
+    }
+  }
+}
+
 TEST_F(RealData, BakeWritesALevelSetThatDecodesToTheSolvedMatrices) {
   auto asset = io::LoadAssetFile(DataPath("characters/Fox.glb"));
   ASSERT_TRUE(asset.ok());
