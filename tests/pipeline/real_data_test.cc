@@ -3,7 +3,10 @@
 #include <cmath>
 #include <filesystem>
 #include <limits>
+#include <memory>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -53,6 +56,15 @@ std::shared_ptr<const core::PreparedMotion> Prepare(const RealScene& s, core::Va
   auto prepared = core::PreparedMotion::Create(s.inputs.character, s.inputs.motion, settings);
   EXPECT_TRUE(prepared.ok()) << prepared.status().ToString();
   return *prepared;
+}
+
+// A bake of `asset`'s default ladder in `variant`, without the report's skinning pass.
+BakeRequest DefaultLadderRequest(std::shared_ptr<const io::Asset> asset, core::Variant variant) {
+  BakeRequest request;
+  request.character = std::move(asset);
+  request.settings.variant = variant;
+  request.measure_skinning_pass = false;
+  return request;
 }
 
 core::ReducedSkeleton Level(const RealScene& s, int kept) {
@@ -480,11 +492,8 @@ TEST_F(RealData, TheDefaultLadderHoldsTheSmallestUsefulLevel) {
     for (core::Variant variant : {core::Variant::kVP, core::Variant::kVPNOPD}) {
       auto asset = io::LoadAssetFile(DataPath(file));
       ASSERT_TRUE(asset.ok()) << file;
-      BakeRequest request;
-      request.character = *asset;
-      request.settings.variant = variant;
+      BakeRequest request = DefaultLadderRequest(*asset, variant);
       request.threads = 1;
-      request.measure_skinning_pass = false;
       auto output = Bake(request);
       ASSERT_TRUE(output.ok()) << file << ": " << output.status().ToString();
       int count = 0;
@@ -520,10 +529,7 @@ TEST_F(RealData, TheDefaultLadderDoesNotDependOnTheThreads) {
     for (core::Variant variant : {core::Variant::kVP, core::Variant::kVPNOPD}) {
       auto asset = io::LoadAssetFile(DataPath(file));
       ASSERT_TRUE(asset.ok()) << file;
-      BakeRequest request;
-      request.character = *asset;
-      request.settings.variant = variant;
-      request.measure_skinning_pass = false;
+      BakeRequest request = DefaultLadderRequest(*asset, variant);
       std::string one_thread_bytes;
       std::vector<int> one_thread_ladder;
       for (int threads : {1, 2, 4}) {
