@@ -142,6 +142,66 @@ std::vector<int> DefaultLadder(int joint_count, int minimum) {
 
 namespace {
 
+// The bisection of Bake's search for the smallest useful level between lo (fails, or the
+// fewest joints a level may keep) and hi (meets the bound): the count it ends on. Probes
+// only steer the search: on a long motion they run on at most kProbeFrames evenly strided
+// frames, and they only decide whether the maximum error is within the bound (the level's
+// own maximum on those frames: EveryNthFrame solves the full motion's problem). With
+// several threads, the probes the bisection may make next run beside the one it makes now:
+// one per thread, the bisection's tree of brackets taken breadth first. It then decides
+// from every probe made, exactly as one probe at a time would (the count found does not
+// depend on the threads), a round taking as many steps as the probes made reach.
+StatusOr<int> SmallestUsefulCount(const std::shared_ptr<const core::PreparedMotion>& prepared,
+                                  const core::JointRanking& ranking, int lo, int hi, double bound,
+                                  TaskPool& pool, const std::atomic<bool>* cancel) {
+  constexpr int kProbeFrames = 64;
+  const int stride = (prepared->frame_count() + kProbeFrames - 1) / kProbeFrames;
+  std::shared_ptr<const core::PreparedMotion> probe = prepared;
+  if (stride > 1) {
+    auto strided = prepared->EveryNthFrame(stride);
+    if (!strided.ok()) return strided.status();
+    probe = *std::move(strided);
+  }
+  std::map<int, bool> within_at;  // kept joints -> probe within the bound
+  while (lo < hi) {
+    if (Cancelled(cancel)) return CancelledStatus();
+    std::vector<int> probes;
+    std::vector<std::pair<int, int>> brackets = {{lo, hi}};
+    for (size_t next = 0;
+         next < brackets.size() && probes.size() < static_cast<size_t>(pool.threads()); ++next) {
+      const auto [low, high] = brackets[next];
+      if (low >= high) continue;
+      const int mid = low + (high - low) / 2;
+      if (!within_at.count(mid)) probes.push_back(mid);
+      brackets.emplace_back(low, mid);       // mid within the bound
+      brackets.emplace_back(mid + 1, high);  // mid not within it
+    }
+    std::vector<StatusOr<bool>> within(probes.size(), StatusOr<bool>(false));
+    pool.Run(static_cast<int>(probes.size()), [&](int index) {
+      auto level = core::ReduceSkeletonToCount(prepared->character(), ranking, probes[index]);
+      if (!level.ok()) {
+        within[index] = level.status();
+        return;
+      }
+      within[index] = probe->MaxVertexErrorWithin(*level, bound);
+    });
+    for (size_t index = 0; index < probes.size(); ++index) {
+      if (!within[index].ok()) return within[index].status();
+      within_at[probes[index]] = *within[index];
+    }
+    while (lo < hi) {
+      const auto made = within_at.find(lo + (hi - lo) / 2);
+      if (made == within_at.end()) break;
+      if (made->second) {
+        hi = made->first;
+      } else {
+        lo = made->first + 1;
+      }
+    }
+  }
+  return hi;
+}
+
 // PrepareInputs for a validated request, on `pool`, without the motion's check: Bake's
 // core entry points (the ranking, PreparedMotion::Create) each make it first.
 StatusOr<BakeInputs> PrepareInputsOn(const BakeRequest& request, TaskPool& pool) {
@@ -319,11 +379,8 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
     // The smallest useful skeleton: the fewest joints whose optimised maximum vertex error
     // is within the bound. The ladder's exact errors bracket it; bisection narrows the
     // bracket (the error grows as joints go, though not strictly, so this finds a count
-    // that meets the bound with the one below failing). Probes only steer the search: on a
-    // long motion they run on at most kProbeFrames evenly strided frames, and they only
-    // decide whether the maximum error is within the bound (the level's own maximum on
-    // those frames: EveryNthFrame solves the full motion's problem); the chosen level is
-    // then solved in full on every frame.
+    // that meets the bound with the one below failing; SmallestUsefulCount). The chosen
+    // level is then solved in full on every frame.
     const double bound = request.smallest_useful_error_pct;
     int lo = minimum, hi = n;
     for (const auto& [count, result] : solved) {
@@ -335,56 +392,9 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
     }
     lo = std::min(lo, hi);
     if (lo < hi) {
-      constexpr int kProbeFrames = 64;
-      const int stride = (motion.frame_count + kProbeFrames - 1) / kProbeFrames;
-      std::shared_ptr<const core::PreparedMotion> probe = *prepared;
-      if (stride > 1) {
-        auto strided = (*prepared)->EveryNthFrame(stride);
-        if (!strided.ok()) return strided.status();
-        probe = *std::move(strided);
-      }
-      // With several threads, the probes the bisection may make next run beside the one it
-      // makes now: one per thread, the bisection's tree of brackets taken breadth first.
-      // It then decides from every probe made, exactly as one probe at a time would (the
-      // level found does not depend on the threads), a round taking as many steps as the
-      // probes made reach.
-      std::map<int, bool> within_at;  // kept joints -> probe within the bound
-      while (lo < hi) {
-        if (Cancelled(cancel)) return CancelledStatus();
-        std::vector<int> probes;
-        std::vector<std::pair<int, int>> brackets = {{lo, hi}};
-        for (size_t next = 0;
-             next < brackets.size() && probes.size() < static_cast<size_t>(threads); ++next) {
-          const auto [low, high] = brackets[next];
-          if (low >= high) continue;
-          const int mid = low + (high - low) / 2;
-          if (!within_at.count(mid)) probes.push_back(mid);
-          brackets.emplace_back(low, mid);       // mid within the bound
-          brackets.emplace_back(mid + 1, high);  // mid not within it
-        }
-        std::vector<StatusOr<bool>> within(probes.size(), StatusOr<bool>(false));
-        pool.Run(static_cast<int>(probes.size()), [&](int index) {
-          auto level = core::ReduceSkeletonToCount(*inputs->character, *ranking, probes[index]);
-          if (!level.ok()) {
-            within[index] = level.status();
-            return;
-          }
-          within[index] = probe->MaxVertexErrorWithin(*level, bound);
-        });
-        for (size_t index = 0; index < probes.size(); ++index) {
-          if (!within[index].ok()) return within[index].status();
-          within_at[probes[index]] = *within[index];
-        }
-        while (lo < hi) {
-          const auto made = within_at.find(lo + (hi - lo) / 2);
-          if (made == within_at.end()) break;
-          if (made->second) {
-            hi = made->first;
-          } else {
-            lo = made->first + 1;
-          }
-        }
-      }
+      auto found = SmallestUsefulCount(*prepared, *ranking, lo, hi, bound, pool, cancel);
+      if (!found.ok()) return found.status();
+      hi = *found;
     }
     if (!solved.count(hi)) {
       counts.push_back(hi);
