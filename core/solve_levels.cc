@@ -211,13 +211,16 @@ struct PreparedMotion::Impl {
     kMaxVertexError,  // the exact maximum vertex error and where it is
     kAll,             // both and the sampled figures: every field of LevelErrors
   };
-  // In one pass over the frames (the maximum search then revisits the frames it needs).
-  // A finite `decide_within` (length) makes the maximum search a decision: it stops at the
-  // first vertex past it and refines no bound within it, so the maximum it reports is only
-  // on the right side of it.
+  // The quadratic figures (with the sampled ones) and the maximum read the same Delta and
+  // nothing of each other: with both asked for, they are two pieces on `run`, each one pass
+  // over the frames (the maximum search then revisits the frames it needs), and the
+  // figures do not depend on the runner. A finite `decide_within` (length) makes the
+  // maximum search a decision: it stops at the first vertex past it and refines no bound
+  // within it, so the maximum it reports is only on the right side of it.
   void EvaluateErrors(const DeltaView& delta, const std::vector<int>& kept, Figures figures,
                       LevelErrors& out,
-                      double decide_within = std::numeric_limits<double>::infinity()) const;
+                      double decide_within = std::numeric_limits<double>::infinity(),
+                      const PieceRunner& run = {}) const;
   std::vector<size_t> ActivePairs(const DeltaView& delta) const;
   // Joint pair q's terms of the vertex parts of Ep and En in a frame (4n x 3, Delta_k^T
   // stacked): tr(Delta_k^T Cp_kl Delta_l) and tr(Delta_k^T Cn_kl Delta_l), doubled for k != l.
@@ -606,62 +609,77 @@ std::vector<size_t> PreparedMotion::Impl::ActivePairs(const DeltaView& delta) co
 }
 
 void PreparedMotion::Impl::EvaluateErrors(const DeltaView& delta, const std::vector<int>& kept,
-                                          Figures figures, LevelErrors& out, double decide_within) const {
-  RunWithWidestSimd([&] {
-    const bool quadratic = figures != Figures::kMaxVertexError;
-    const bool maximum = figures != Figures::kQuadratic;
-    const bool sampled = figures == Figures::kAll;
-    // Only the joints whose Delta can be nonzero are read (all of an optimised level's, the
-    // removed ones of a baseline); the others' blocks of `frame` stay zero.
-    std::vector<uint8_t> moving(n, 0);
-    std::vector<int> moving_joints;
-    moving_joints.reserve(n);
-    for (int k = 0; k < n; ++k) {
-      moving[k] = delta.Moves(k);
-      if (moving[k]) moving_joints.push_back(k);
-    }
-    const bool moves = !moving_joints.empty();
-    std::vector<int> moving_kept;
-    moving_kept.reserve(kept.size());
-    for (int j : kept) {
-      if (moving[j]) moving_kept.push_back(j);
-    }
-    if (quadratic) {
-      out.e.assign(frames, 0.0);
-      out.ep_vertex.assign(frames, 0.0);
-      out.ep_joint.assign(frames, 0.0);
-      out.en_vertex.assign(frames, 0.0);
-      out.en_joint.assign(frames, 0.0);
-    }
-    // The full skeleton (or a baseline that removes nothing): every figure is exactly 0.
-    if (!moves) return;
+                                          Figures figures, LevelErrors& out, double decide_within,
+                                          const PieceRunner& run) const {
+  const bool quadratic = figures != Figures::kMaxVertexError;
+  const bool maximum = figures != Figures::kQuadratic;
+  const bool sampled = figures == Figures::kAll;
+  // Only the joints whose Delta can be nonzero are read (all of an optimised level's, the
+  // removed ones of a baseline); the others' blocks of a frame stay zero.
+  std::vector<uint8_t> moving(n, 0);
+  std::vector<int> moving_joints;
+  moving_joints.reserve(n);
+  for (int k = 0; k < n; ++k) {
+    moving[k] = delta.Moves(k);
+    if (moving[k]) moving_joints.push_back(k);
+  }
+  if (quadratic) {
+    out.e.assign(frames, 0.0);
+    out.ep_vertex.assign(frames, 0.0);
+    out.ep_joint.assign(frames, 0.0);
+    out.en_vertex.assign(frames, 0.0);
+    out.en_joint.assign(frames, 0.0);
+  }
+  // The full skeleton (or a baseline that removes nothing): every figure is exactly 0.
+  if (moving_joints.empty()) return;
 
-    const std::vector<size_t> active_pairs = quadratic ? ActivePairs(delta) : std::vector<size_t>{};
-    const std::optional<KeptForms> kept_forms =
-        quadratic ? MakeKeptForms(delta, kept, active_pairs.size()) : std::nullopt;
-    Eigen::Matrix<double, Eigen::Dynamic, 3> kept_frame(kept_forms ? 4 * kept.size() : 0, 3);
-    MaxSearchBounds bounds = maximum ? MakeMaxSearchBounds(nullptr, moving) : MaxSearchBounds{};
-    SampleSums sums;
-    size_t next_sample = 0;
-    SampleScratch scratch(sampled ? n : 0, sampled ? sample_vertices.size() : 0);
-    SampleValues values(sampled ? sample_vertices.size() : 0);
-    Eigen::Matrix<double, Eigen::Dynamic, 3> frame(4 * n, 3);
-    frame.setZero();
-    for (int t = 0; t < frames; ++t) {
-      delta.Frame(t, moving_joints, frame);
-      if (quadratic) {
+  const auto quadratic_figures = [&] {
+    RunWithWidestSimd([&] {
+      std::vector<int> moving_kept;
+      moving_kept.reserve(kept.size());
+      for (int j : kept) {
+        if (moving[j]) moving_kept.push_back(j);
+      }
+      const std::vector<size_t> active_pairs = ActivePairs(delta);
+      const std::optional<KeptForms> kept_forms = MakeKeptForms(delta, kept, active_pairs.size());
+      Eigen::Matrix<double, Eigen::Dynamic, 3> kept_frame(kept_forms ? 4 * kept.size() : 0, 3);
+      SampleSums sums;
+      size_t next_sample = 0;
+      SampleScratch scratch(sampled ? n : 0, sampled ? sample_vertices.size() : 0);
+      SampleValues values(sampled ? sample_vertices.size() : 0);
+      Eigen::Matrix<double, Eigen::Dynamic, 3> frame(4 * n, 3);
+      frame.setZero();
+      for (int t = 0; t < frames; ++t) {
+        delta.Frame(t, moving_joints, frame);
         FrameQuadraticErrors(frame, active_pairs, kept_forms ? &*kept_forms : nullptr, kept_frame,
                              kept, moving_kept, t, out);
+        if (sampled && next_sample < sample_frames.size() && sample_frames[next_sample] == t) {
+          SampleFrameValues(frame, next_sample++, nullptr, scratch, values);
+          AddSampleSums(values, sums);
+        }
       }
-      if (maximum) FrameBounds(frame, t, bounds);
-      if (sampled && next_sample < sample_frames.size() && sample_frames[next_sample] == t) {
-        SampleFrameValues(frame, next_sample++, nullptr, scratch, values);
-        AddSampleSums(values, sums);
+      FinishErrors(sampled ? &sums : nullptr, out);
+    });
+  };
+  const auto maximum_figures = [&] {
+    RunWithWidestSimd([&] {
+      MaxSearchBounds bounds = MakeMaxSearchBounds(nullptr, moving);
+      Eigen::Matrix<double, Eigen::Dynamic, 3> frame(4 * n, 3);
+      frame.setZero();
+      for (int t = 0; t < frames; ++t) {
+        delta.Frame(t, moving_joints, frame);
+        FrameBounds(frame, t, bounds);
       }
-    }
-    if (maximum) MaxVertexError(delta, bounds, decide_within, MaxSearchStart{}, nullptr, out);
-    if (quadratic) FinishErrors(sampled ? &sums : nullptr, out);
-  });
+      MaxVertexError(delta, bounds, decide_within, MaxSearchStart{}, nullptr, out);
+    });
+  };
+  if (quadratic && maximum) {
+    RunPieces(run, 2, [&](int piece) { piece == 0 ? maximum_figures() : quadratic_figures(); });
+  } else if (quadratic) {
+    quadratic_figures();
+  } else {
+    maximum_figures();
+  }
 }
 
 void PreparedMotion::Impl::FinishErrors(const SampleSums* sums, LevelErrors& out) const {
@@ -1567,7 +1585,8 @@ StatusOr<LevelResult> PreparedMotion::SolveLevel(const ReducedSkeleton& level) c
   return result;
 }
 
-StatusOr<LevelResult> PreparedMotion::SolveOptimized(const ReducedSkeleton& level) const {
+StatusOr<LevelResult> PreparedMotion::SolveOptimized(const ReducedSkeleton& level,
+                                                     const PieceRunner& run) const {
   const Impl& d = *impl_;
   auto solution = SolveVariant(d, level);
   if (!solution.ok()) return solution.status();
@@ -1588,7 +1607,8 @@ StatusOr<LevelResult> PreparedMotion::SolveOptimized(const ReducedSkeleton& leve
       }
     }
   }
-  d.EvaluateErrors(solution->Delta(d, level), level.kept_joints, Impl::Figures::kAll, result.optimized);
+  d.EvaluateErrors(solution->Delta(d, level), level.kept_joints, Impl::Figures::kAll, result.optimized,
+                   std::numeric_limits<double>::infinity(), run);
   return result;
 }
 
@@ -1598,11 +1618,13 @@ PreparedMotion::Impl::DeltaView PreparedMotion::Impl::BaselineDelta(const Reduce
   return baseline;
 }
 
-StatusOr<LevelErrors> PreparedMotion::BaselineErrors(const ReducedSkeleton& level) const {
+StatusOr<LevelErrors> PreparedMotion::BaselineErrors(const ReducedSkeleton& level,
+                                                     const PieceRunner& run) const {
   const Impl& d = *impl_;
   if (Status status = ValidateLevel(level, d.n); !status.ok()) return status;
   LevelErrors errors;
-  d.EvaluateErrors(d.BaselineDelta(level), level.kept_joints, Impl::Figures::kAll, errors);
+  d.EvaluateErrors(d.BaselineDelta(level), level.kept_joints, Impl::Figures::kAll, errors,
+                   std::numeric_limits<double>::infinity(), run);
   return errors;
 }
 

@@ -149,9 +149,10 @@ class PreparedMotion {
   StatusOr<LevelResult> SolveLevel(const ReducedSkeleton& level) const;
   // SolveLevel in two independent halves, to run concurrently: the matrices with the
   // optimised figures (LevelResult::baseline left empty), and the baseline's figures, which
-  // do not depend on the solution and cost about as much.
-  StatusOr<LevelResult> SolveOptimized(const ReducedSkeleton& level) const;
-  StatusOr<LevelErrors> BaselineErrors(const ReducedSkeleton& level) const;
+  // do not depend on the solution. Each evaluates its figures in two pieces on `run`
+  // (base/pieces.h); the results do not depend on the runner.
+  StatusOr<LevelResult> SolveOptimized(const ReducedSkeleton& level, const PieceRunner& run = {}) const;
+  StatusOr<LevelErrors> BaselineErrors(const ReducedSkeleton& level, const PieceRunner& run = {}) const;
 
   // Whether the level's optimised maximum vertex error (LevelErrors::max_vertex_error_pct)
   // is at most bound_pct > 0: what a search over levels needs, decided without finding the

@@ -56,7 +56,8 @@ Status BakeRequest::Validate() const {
 Status SolveLevels(const std::shared_ptr<const core::PreparedMotion>& prepared,
                    const core::JointRanking& ranking, const std::vector<int>& counts, TaskPool& pool,
                    std::map<int, core::LevelResult>& out,
-                   const std::function<void(int)>& on_done, const std::atomic<bool>* cancel) {
+                   const std::function<void(int)>& on_done, const std::atomic<bool>* cancel,
+                   const std::function<void()>& beside) {
   const size_t count = counts.size();
   std::vector<core::ReducedSkeleton> levels;
   for (int kept : counts) {
@@ -74,7 +75,8 @@ Status SolveLevels(const std::shared_ptr<const core::PreparedMotion>& prepared,
   for (size_t index = 1; index < count; ++index) {
     consecutive = consecutive && counts[index] == counts[index - 1] - 1;
   }
-  const size_t tasks = consecutive ? count + 1 : 2 * count;
+  const size_t level_tasks = consecutive ? count + 1 : 2 * count;
+  const size_t tasks = level_tasks + (beside ? 1 : 0);
   std::vector<Status> errors(tasks);
   std::vector<std::atomic<int>> halves_done(count);
   size_t reported = 0;
@@ -82,6 +84,10 @@ Status SolveLevels(const std::shared_ptr<const core::PreparedMotion>& prepared,
       static_cast<int>(tasks),
       [&](int task) {
         if (Cancelled(cancel)) return;
+        if (static_cast<size_t>(task) == level_tasks) {
+          beside();
+          return;
+        }
         const auto set_baseline = [&](size_t index, StatusOr<core::LevelErrors> baseline) {
           if (!baseline.ok()) {
             errors[task] = baseline.status();
@@ -99,11 +105,11 @@ Status SolveLevels(const std::shared_ptr<const core::PreparedMotion>& prepared,
           return;
         }
         if (!consecutive && task % 2 == 1) {
-          set_baseline(task / 2, prepared->BaselineErrors(levels[task / 2]));
+          set_baseline(task / 2, prepared->BaselineErrors(levels[task / 2], pool.Runner()));
           return;
         }
         const size_t index = consecutive ? task - 1 : task / 2;
-        auto result = prepared->SolveOptimized(levels[index]);
+        auto result = prepared->SolveOptimized(levels[index], pool.Runner());
         if (result.ok()) {
           results[index] = *std::move(result);
         } else {
@@ -142,26 +148,28 @@ std::vector<int> DefaultLadder(int joint_count, int minimum) {
 
 namespace {
 
-// The bisection of Bake's search for the smallest useful level between lo (fails, or the
-// fewest joints a level may keep) and hi (meets the bound): the count it ends on. Probes
-// only steer the search: on a long motion they run on at most kProbeFrames evenly strided
-// frames, and they only decide whether the maximum error is within the bound (the level's
-// own maximum on those frames: EveryNthFrame solves the full motion's problem). With
-// several threads, the probes the bisection may make next run beside the one it makes now:
-// one per thread, the bisection's tree of brackets taken breadth first. It then decides
-// from every probe made, exactly as one probe at a time would (the count found does not
-// depend on the threads), a round taking as many steps as the probes made reach.
-StatusOr<int> SmallestUsefulCount(const std::shared_ptr<const core::PreparedMotion>& prepared,
-                                  const core::JointRanking& ranking, int lo, int hi, double bound,
-                                  TaskPool& pool, const std::atomic<bool>* cancel) {
+// The prepared motion the probes of Bake's search for the smallest useful level run on:
+// on a long motion, at most kProbeFrames evenly strided frames of `prepared`.
+StatusOr<std::shared_ptr<const core::PreparedMotion>> ProbeMotion(
+    const std::shared_ptr<const core::PreparedMotion>& prepared) {
   constexpr int kProbeFrames = 64;
   const int stride = (prepared->frame_count() + kProbeFrames - 1) / kProbeFrames;
-  std::shared_ptr<const core::PreparedMotion> probe = prepared;
-  if (stride > 1) {
-    auto strided = prepared->EveryNthFrame(stride);
-    if (!strided.ok()) return strided.status();
-    probe = *std::move(strided);
-  }
+  if (stride == 1) return prepared;
+  return prepared->EveryNthFrame(stride);
+}
+
+// The bisection of Bake's search for the smallest useful level between lo (fails, or the
+// fewest joints a level may keep) and hi (meets the bound): the count it ends on. Probes
+// only steer the search: they run on `probe` (ProbeMotion), and they only decide whether
+// the maximum error is within the bound (the level's own maximum on those frames:
+// EveryNthFrame solves the full motion's problem). With several threads, the probes the
+// bisection may make next run beside the one it makes now: one per thread, the bisection's
+// tree of brackets taken breadth first. It then decides from every probe made, exactly as
+// one probe at a time would (the count found does not depend on the threads), a round
+// taking as many steps as the probes made reach.
+StatusOr<int> SmallestUsefulCount(const core::PreparedMotion& probe, const core::JointRanking& ranking,
+                                  int lo, int hi, double bound, TaskPool& pool,
+                                  const std::atomic<bool>* cancel) {
   std::map<int, bool> within_at;  // kept joints -> probe within the bound
   while (lo < hi) {
     if (Cancelled(cancel)) return CancelledStatus();
@@ -178,12 +186,12 @@ StatusOr<int> SmallestUsefulCount(const std::shared_ptr<const core::PreparedMoti
     }
     std::vector<StatusOr<bool>> within(probes.size(), StatusOr<bool>(false));
     pool.Run(static_cast<int>(probes.size()), [&](int index) {
-      auto level = core::ReduceSkeletonToCount(prepared->character(), ranking, probes[index]);
+      auto level = core::ReduceSkeletonToCount(probe.character(), ranking, probes[index]);
       if (!level.ok()) {
         within[index] = level.status();
         return;
       }
-      within[index] = probe->MaxVertexErrorWithin(*level, bound);
+      within[index] = probe.MaxVertexErrorWithin(*level, bound);
     });
     for (size_t index = 0; index < probes.size(); ++index) {
       if (!within[index].ok()) return within[index].status();
@@ -371,7 +379,11 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
                                       std::max<size_t>(counts.size() + (default_ladder ? 1 : 0), 1),
                     "solve");
   };
-  if (Status status = SolveLevels(*prepared, *ranking, counts, pool, solved, on_level_done, cancel);
+  // The search's probe motion needs none of the ladder's levels: built beside them.
+  std::optional<StatusOr<std::shared_ptr<const core::PreparedMotion>>> probe_motion;
+  if (Status status = SolveLevels(*prepared, *ranking, counts, pool, solved, on_level_done, cancel,
+                                  default_ladder ? [&] { probe_motion = ProbeMotion(*prepared); }
+                                                 : std::function<void()>());
       !status.ok()) {
     return status;
   }
@@ -392,7 +404,8 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
     }
     lo = std::min(lo, hi);
     if (lo < hi) {
-      auto found = SmallestUsefulCount(*prepared, *ranking, lo, hi, bound, pool, cancel);
+      if (!probe_motion->ok()) return probe_motion->status();
+      auto found = SmallestUsefulCount(***probe_motion, *ranking, lo, hi, bound, pool, cancel);
       if (!found.ok()) return found.status();
       hi = *found;
     }

@@ -91,11 +91,12 @@ double SkinningPassSeconds(const core::Character& character, const core::Motion&
 // each level's optimised half is a task, and so is its baseline, except that levels a joint
 // apart (every level) take their baselines one from the other in one task
 // (core::BaselineSequence). on_done(levels done so far) runs on the calling thread as
-// levels complete. kNotFound ("cancelled") when *cancel becomes true.
+// levels complete. `beside`, if given, is one more task, after the levels' (work of the
+// caller's that needs none of them). kNotFound ("cancelled") when *cancel becomes true.
 Status SolveLevels(const std::shared_ptr<const core::PreparedMotion>& prepared,
                    const core::JointRanking& ranking, const std::vector<int>& counts, TaskPool& pool,
                    std::map<int, core::LevelResult>& out, const std::function<void(int)>& on_done = {},
-                   const std::atomic<bool>* cancel = nullptr);
+                   const std::atomic<bool>* cancel = nullptr, const std::function<void()>& beside = {});
 
 // The default ladder for n joints and the minimum the locks allow: n, ~3n/4, ~n/2, ~n/4,
 // clamped to [minimum, n], duplicates removed, finest first (the smallest useful level is
