@@ -51,16 +51,4 @@ Status ValidateMotion(const Motion& motion, const Character& character) {
   return Status::Ok();
 }
 
-void ComputeSkinningMatrices(const Motion& motion, const Character& character,
-                             std::vector<Affine34d>& out) {
-  const int n = motion.joint_count;
-  std::vector<Affine34d> inverse_bind(n);
-  for (int j = 0; j < n; ++j) inverse_bind[j] = InverseAffine(character.skeleton().bind_world[j]);
-  for (int t = 0; t < motion.frame_count; ++t) {
-    for (int j = 0; j < n; ++j) {
-      out[static_cast<size_t>(t) * n + j] = ComposeAffine(motion.world(t, j), inverse_bind[j]);
-    }
-  }
-}
-
 }  // namespace motionlod::core

@@ -29,9 +29,4 @@ struct Motion {
 // Checks shapes against the character, finiteness and invertibility of every matrix.
 Status ValidateMotion(const Motion& motion, const Character& character);
 
-// K_j(t) = M_j(t) * inverse(M0_j) for every frame and joint: T x n, same layout as
-// Motion::joint_world. `out` must have T * n entries.
-void ComputeSkinningMatrices(const Motion& motion, const Character& character,
-                             std::vector<Affine34d>& out);
-
 }  // namespace motionlod::core

@@ -371,12 +371,35 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
   d.n = n;
   d.frames = frames;
 
-  std::vector<Affine34d> skinning(static_cast<size_t>(frames) * n);
-  ComputeSkinningMatrices(motion, c, skinning);
-  d.kt.resize(4 * n, 3 * frames);
-  for (int t = 0; t < frames; ++t) {
-    for (int k = 0; k < n; ++k) d.kt.block<4, 3>(4 * k, 3 * t) = skinning[static_cast<size_t>(t) * n + k].transpose();
+  // Kt: each skinning matrix K_k(t) = M_k(t) B_k^-1 (B_k the bind pose) written straight
+  // into its block, row r of K as lanes: sum_i M(r, i) (row i of B^-1), plus M(r, 3) in the
+  // translation's lane. (Composed into a list of matrices first and copied into Kt, then
+  // transposed into Kt^T by Eigen one element at a time, they cost a short clip's Create a
+  // fifth of its time: three passes over T x n matrices, each slower on two threads, where
+  // a thread writes lines the other one held.)
+  std::vector<Lanes4> inverse_bind_rows(3 * static_cast<size_t>(n));
+  for (int k = 0; k < n; ++k) {
+    const Affine34d inverse = InverseAffine(c.skeleton().bind_world[k]);
+    for (int i = 0; i < 3; ++i) {
+      inverse_bind_rows[3 * k + i] = Lanes4{inverse(i, 0), inverse(i, 1), inverse(i, 2), inverse(i, 3)};
+    }
   }
+  d.kt.resize(4 * n, 3 * frames);
+  RunWithWidestSimd([&] {
+    const Eigen::Index stride = d.kt.rows();
+    for (int t = 0; t < frames; ++t) {
+      double* frame = d.kt.data() + 3 * t * stride;
+      for (int k = 0; k < n; ++k) {
+        const double* m = motion.world(t, k).data();  // column-major 3x4
+        const Lanes4* inverse_rows = &inverse_bind_rows[3 * k];
+        for (int r = 0; r < 3; ++r) {
+          Lanes4 row = m[r] * inverse_rows[0] + m[3 + r] * inverse_rows[1] + m[6 + r] * inverse_rows[2];
+          row[3] += m[9 + r];
+          *AsLanes4(frame + r * stride + 4 * k) = row;
+        }
+      }
+    }
+  });
 
   for (const Character::JointPairMoment& moment : c.joint_pair_moments()) {
     const double factor = moment.k == moment.l ? 1.0 : 2.0;
@@ -469,16 +492,37 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
     q.topLeftCorner<3, 3>() += d.beta_fit * moment.normal_moment;
     d.pair_fit.push_back(q);
   }
-  d.ktt = d.kt.transpose();
+  // Kt^T as 4x4 blocks transposed in registers (Transpose4): four columns of a joint's
+  // four rows in, four rows of its columns out, each one vector.
+  d.ktt.resize(3 * frames, 4 * n);
+  RunWithWidestSimd([&] {
+    const Eigen::Index kt_stride = d.kt.rows(), ktt_stride = d.ktt.rows();
+    const int cols = 3 * frames;
+    int col = 0;
+    for (; col + 4 <= cols; col += 4) {
+      for (int k = 0; k < n; ++k) {
+        Lanes4 columns[4], rows[4];
+        for (int f = 0; f < 4; ++f) columns[f] = *AsLanes4(d.kt.data() + (col + f) * kt_stride + 4 * k);
+        Transpose4(columns, rows);
+        for (int a = 0; a < 4; ++a) *AsLanes4(d.ktt.data() + (4 * k + a) * ktt_stride + col) = rows[a];
+      }
+    }
+    for (; col < cols; ++col) {
+      for (int row = 0; row < 4 * n; ++row) d.ktt(col, row) = d.kt(row, col);
+    }
+  });
   // F^T = Kt^T Q, one pair at a time: F_k += Q_kl Kt_l and F_l += Q_kl^T Kt_k, each a
   // product of 4 contiguous columns (a sparse-dense product would update one coefficient
-  // at a time); in pieces of frames (rows), each in the widest vectors this CPU has.
-  d.ft = MatrixXd::Zero(3 * frames, 4 * n);
+  // at a time); in pieces of frames (rows), each in the widest vectors this CPU has, and
+  // each piece zeroes its own rows first (zeroing all of F^T up front was a serial pass
+  // over it, and left the lines of every piece with the thread that zeroed them).
+  d.ft.resize(3 * frames, 4 * n);
   const Eigen::Index ft_stride = d.ft.rows();
   RunPieces(run, (frames + kFramesPerPiece - 1) / kFramesPerPiece, [&](int piece) {
     RunWithWidestSimd([&] {
       const Eigen::Index first = 3 * piece * kFramesPerPiece;
       const Eigen::Index rows = std::min<Eigen::Index>(3 * kFramesPerPiece, ft_stride - first);
+      d.ft.middleRows(first, rows).setZero();
       for (size_t q = 0; q < d.pairs.size(); ++q) {
         const auto [k, l] = d.pairs[q];
         AddPanelProduct<4>(d.ft.col(4 * k).data() + first, d.ktt.col(4 * l).data() + first,
