@@ -9,6 +9,7 @@
 #include <unordered_set>
 
 #include "base/lanes.h"
+#include "core/motion.h"
 
 namespace motionlod::core {
 namespace {
@@ -96,11 +97,7 @@ Status ValidateRawCharacter(const RawCharacter& raw) {
     }
     const Affine34d& m = s.bind_world[j];
     if (!m.allFinite()) return InvalidArgument(JointLabel(s, jj) + " has a non-finite bind matrix");
-    const double det = m.leftCols<3>().determinant();
-    const double scale = m.leftCols<3>().norm();
-    if (!(std::abs(det) > 1e-12 * scale * scale * scale) || scale == 0) {
-      return InvalidArgument(JointLabel(s, jj) + " has a singular bind matrix");
-    }
+    if (!IsInvertibleAffine(m)) return InvalidArgument(JointLabel(s, jj) + " has a singular bind matrix");
   }
 
   const size_t p = k.positions.size();

@@ -3,10 +3,67 @@
 #include <cmath>
 #include <string>
 
+#include "base/lanes.h"
 #include "base/simd.h"
 #include "core/character.h"
 
 namespace motionlod::core {
+namespace {
+
+// FirstNonInvertibleAffine's test of four matrices (12 doubles each, column-major, the
+// first at m): the index of the first one it rejects, or 4. Each group of four consecutive
+// coefficients of the four matrices is transposed in registers (Transpose4), so that
+// e[r + 3c] holds coefficient (r, c) of all four.
+inline int FirstNonInvertibleOfFour(const double* m) {
+  Lanes4 e[12];
+  for (int group = 0; group < 3; ++group) {
+    Lanes4 in[4];
+    for (int i = 0; i < 4; ++i) in[i] = *AsLanes4(m + 12 * i + 4 * group);
+    Transpose4(in, e + 4 * group);
+  }
+  Lanes4 poison = e[0] - e[0];  // 0 where every entry is finite, NaN otherwise
+  for (int q = 1; q < 12; ++q) poison += e[q] - e[q];
+  Lanes4 norm_squared = e[0] * e[0];
+  for (int q = 1; q < 9; ++q) norm_squared += e[q] * e[q];
+  const Lanes4 det = e[0] * (e[4] * e[8] - e[7] * e[5]) - e[3] * (e[1] * e[8] - e[7] * e[2]) +
+                     e[6] * (e[1] * e[5] - e[4] * e[2]);
+  Lanes4 bound, magnitude;
+  for (int l = 0; l < 4; ++l) {
+    const double scale = std::sqrt(norm_squared[l]);
+    bound[l] = 1e-12 * scale * scale * scale;
+    magnitude[l] = std::abs(det[l]);
+  }
+  const auto ok = (poison == 0) & (magnitude > bound);
+  for (int i = 0; i < 4; ++i) {
+    if (ok[i] == 0) return i;
+  }
+  return 4;
+}
+
+}  // namespace
+
+size_t FirstNonInvertibleAffine(std::span<const Affine34d> matrices) {
+  static_assert(sizeof(Affine34d) == 12 * sizeof(double));
+  return RunWithWidestSimd([&]() -> size_t {
+    const size_t count = matrices.size();
+    const size_t whole = count - count % 4;
+    for (size_t first = 0; first < whole; first += 4) {
+      const int bad = FirstNonInvertibleOfFour(matrices[first].data());
+      if (bad < 4) return first + bad;
+    }
+    if (whole == count) return count;
+    // The last one to three, with identities after them.
+    Affine34d last[4];
+    for (size_t i = 0; i < 4; ++i) last[i] = whole + i < count ? matrices[whole + i] : IdentityAffine();
+    const int bad = FirstNonInvertibleOfFour(last[0].data());
+    return bad < 4 ? whole + bad : count;
+  });
+}
+
+bool IsInvertibleAffine(const Affine34d& matrix) {
+  return FirstNonInvertibleAffine(std::span<const Affine34d>(&matrix, 1)) == 1;
+}
+
 
 Status ValidateMotion(const Motion& motion, const Character& character) {
   if (!(motion.fps > 0) || !std::isfinite(motion.fps)) {
@@ -23,32 +80,14 @@ Status ValidateMotion(const Motion& motion, const Character& character) {
     return InvalidArgument("the motion holds " + std::to_string(motion.joint_world.size()) +
                            " matrices, expected frames x joints = " + std::to_string(expected));
   }
-  // Every bake validates its motion at each core entry point, and a long clip holds 10^5
-  // matrices: one branch-free pass decides, and only a failure is looked for again.
-  const auto valid = [](const Affine34d& m) {
-    double poison = 0;  // 0 where every entry is finite, NaN otherwise
-    for (int i = 0; i < 12; ++i) poison += m.data()[i] - m.data()[i];
-    const double scale = m.leftCols<3>().norm();
-    return (poison == 0) &
-           (std::abs(m.leftCols<3>().determinant()) > 1e-12 * scale * scale * scale);
-  };
-  const bool all_valid = RunWithWidestSimd([&] {
-    bool all = true;
-    for (const Affine34d& m : motion.joint_world) all &= valid(m);
-    return all;
-  });
-  if (all_valid) return Status::Ok();
-  for (int t = 0; t < motion.frame_count; ++t) {
-    for (int j = 0; j < motion.joint_count; ++j) {
-      const Affine34d& m = motion.world(t, j);
-      if (valid(m)) continue;
-      const std::string where = "frame " + std::to_string(t) + ", joint '" +
-                                character.skeleton().joint_names[j] + "'";
-      return InvalidArgument(
-          (m.allFinite() ? "singular joint matrix at " : "non-finite joint matrix at ") + where);
-    }
-  }
-  return Status::Ok();
+  const size_t bad = FirstNonInvertibleAffine(motion.joint_world);
+  if (bad == motion.joint_world.size()) return Status::Ok();
+  const int t = static_cast<int>(bad / motion.joint_count), j = static_cast<int>(bad % motion.joint_count);
+  const std::string where =
+      "frame " + std::to_string(t) + ", joint '" + character.skeleton().joint_names[j] + "'";
+  return InvalidArgument((motion.joint_world[bad].allFinite() ? "singular joint matrix at "
+                                                              : "non-finite joint matrix at ") +
+                         where);
 }
 
 }  // namespace motionlod::core

@@ -2,6 +2,8 @@
 // fixed rate. Skinning matrices follow as K_j(t) = M_j(t) * inverse(M0_j).
 #pragma once
 
+#include <cstddef>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -25,6 +27,15 @@ struct Motion {
 
   const Affine34d& world(int t, int j) const { return joint_world[t * joint_count + j]; }
 };
+
+// Whether an affine matrix can be a joint's transform: every entry finite and its 3x3 part
+// A invertible by a margin that no scale changes, |det A| > 1e-12 |A|_F^3.
+bool IsInvertibleAffine(const Affine34d& matrix);
+
+// The index of the first matrix that IsInvertibleAffine rejects, or matrices.size() when it
+// rejects none. Four matrices at a time, each coefficient one vector of their four values:
+// a long clip holds 10^5 joint matrices, and a bake checks its motion at each entry point.
+size_t FirstNonInvertibleAffine(std::span<const Affine34d> matrices);
 
 // Checks shapes against the character, finiteness and invertibility of every matrix.
 Status ValidateMotion(const Motion& motion, const Character& character);

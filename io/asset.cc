@@ -115,19 +115,13 @@ StatusOr<core::Motion> Asset::SampleAnimation(std::string_view name, double fps,
   core::Motion motion = SampleClip(*clip, impl_->nodes, impl_->rig.joint_nodes, fps, pool);
   // Corrupted transforms (a zero scale in a rest matrix, say) must not reach the caller
   // as a motion that core::ValidateMotion would reject.
-  const int n = motion.joint_count;
-  for (int t = 0; t < motion.frame_count; ++t) {
-    for (int j = 0; j < n; ++j) {
-      const core::Affine34d& m = motion.world(t, j);
-      const double scale = m.leftCols<3>().norm();
-      if (!m.allFinite() ||
-          !(std::abs(m.leftCols<3>().determinant()) > 1e-12 * scale * scale * scale)) {
-        return InvalidArgument("animation " + Quote(clip->info.name) + " gives joint " +
-                               Quote(impl_->rig.character.skeleton.joint_names[j]) +
-                               " a singular or non-finite matrix at frame " + std::to_string(t) +
-                               " (corrupted transforms?)");
-      }
-    }
+  const size_t bad = core::FirstNonInvertibleAffine(motion.joint_world);
+  if (bad < motion.joint_world.size()) {
+    const size_t n = static_cast<size_t>(motion.joint_count);
+    return InvalidArgument("animation " + Quote(clip->info.name) + " gives joint " +
+                           Quote(impl_->rig.character.skeleton.joint_names[bad % n]) +
+                           " a singular or non-finite matrix at frame " + std::to_string(bad / n) +
+                           " (corrupted transforms?)");
   }
   return motion;
 }

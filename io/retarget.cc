@@ -7,6 +7,7 @@
 #include <limits>
 #include <map>
 
+#include "core/motion.h"
 #include "io/text.h"
 
 namespace motionlod::io {
@@ -45,10 +46,7 @@ Status CheckSkeleton(const core::RawSkeleton& s, const char* which) {
       return InvalidArgument("joint '" + s.joint_names[j] + "' of the " + w +
                              " skeleton does not follow its parent");
     }
-    const Affine34d& m = s.bind_world[j];
-    const double scale = m.leftCols<3>().norm();
-    if (!m.allFinite() ||
-        !(std::abs(m.leftCols<3>().determinant()) > 1e-12 * scale * scale * scale)) {
+    if (!core::IsInvertibleAffine(s.bind_world[j])) {
       return InvalidArgument("joint '" + s.joint_names[j] + "' of the " + w +
                              " skeleton has a singular bind matrix");
     }

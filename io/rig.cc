@@ -6,6 +6,7 @@
 #include <set>
 #include <utility>
 
+#include "core/motion.h"
 #include "io/proxy_skin.h"
 #include "io/text.h"
 
@@ -20,12 +21,6 @@ struct MeshInstance {
   int node;
   int mesh;
 };
-
-bool Invertible(const Affine34d& m) {
-  const double scale = m.leftCols<3>().norm();
-  return m.allFinite() && scale > 0 &&
-         std::abs(m.leftCols<3>().determinant()) > 1e-12 * scale * scale * scale;
-}
 
 // Whether two affine maps move the points within `radius` of the origin alike, to 0.1%
 // of the size they map that region to.
@@ -184,7 +179,7 @@ StatusOr<Rig> BuildRig(const Scene& scene, int max_influences, const std::string
     std::vector<int> weight(bone_count);
     for (size_t b = 0; b < bone_count; ++b) {
       const SceneBone& bone = mesh.bones[b];
-      if (!Invertible(bone.offset)) {
+      if (!core::IsInvertibleAffine(bone.offset)) {
         return InvalidArgument("bone '" + bone.name + "' of mesh '" + mesh.name +
                                "' has a singular offset matrix");
       }
@@ -210,7 +205,7 @@ StatusOr<Rig> BuildRig(const Scene& scene, int max_influences, const std::string
       }
       d = ComposeAffine(rest_world[rig.joint_nodes[joint[top]]], mesh.bones[top].offset);
     }
-    if (!Invertible(d)) {
+    if (!core::IsInvertibleAffine(d)) {
       return InvalidArgument("mesh '" + mesh.name + "' has a singular bind transform");
     }
     int disagree = 0;
@@ -232,7 +227,7 @@ StatusOr<Rig> BuildRig(const Scene& scene, int max_influences, const std::string
   }
   for (int j = 0; j < n; ++j) {
     if (!has_bind[j]) skeleton.bind_world[j] = rest_world[rig.joint_nodes[j]];
-    if (!Invertible(skeleton.bind_world[j])) {
+    if (!core::IsInvertibleAffine(skeleton.bind_world[j])) {
       return InvalidArgument("joint '" + skeleton.joint_names[j] + "' has a singular bind matrix");
     }
   }
@@ -261,7 +256,7 @@ StatusOr<Rig> BuildRig(const Scene& scene, int max_influences, const std::string
                                       InverseAffine(rest_world[rig.joint_nodes[node_joint]])),
                         rest_world[instances[i].node]);
     }
-    if (!Invertible(to_model)) {
+    if (!core::IsInvertibleAffine(to_model)) {
       return InvalidArgument("mesh '" + mesh.name + "' is placed by a singular transform");
     }
     const Eigen::Matrix3d normal_matrix = to_model.leftCols<3>().inverse().transpose();

@@ -278,5 +278,50 @@ TEST(ValidateMotion, RejectsShapeAndValueErrors) {
   }
 }
 
+TEST(FirstNonInvertibleAffine, FindsTheFirstRejectedMatrixWhereverItSits) {
+  // Rotations with a translation, one per index: the check runs four matrices at a time
+  // and pads the last one to three, so every count up to 9 and every position is tried.
+  const auto valid = [](int i) {
+    Affine34d m;
+    m.leftCols<3>() = Eigen::AngleAxisd(0.3 * i, Vec3d(1, 2, 3).normalized()).toRotationMatrix();
+    m.col(3) = Vec3d(i, -2.0 * i, 0.5);
+    return m;
+  };
+  Affine34d singular = valid(1);
+  singular.col(2) = 2 * singular.col(0);
+  Affine34d nearly_singular = valid(2);
+  nearly_singular.col(2) = 1e-13 * nearly_singular.col(2);
+  Affine34d infinite = valid(3);
+  infinite(0, 0) = INFINITY;
+  Affine34d nan_translation = valid(4);
+  nan_translation(1, 3) = NAN;
+  const Affine34d zero = Affine34d::Zero();
+  for (const Affine34d& bad : {singular, nearly_singular, infinite, nan_translation, zero}) {
+    EXPECT_FALSE(IsInvertibleAffine(bad));
+    for (size_t count = 1; count <= 9; ++count) {
+      for (size_t at = 0; at < count; ++at) {
+        std::vector<Affine34d> matrices;
+        for (size_t i = 0; i < count; ++i) matrices.push_back(valid(static_cast<int>(i)));
+        matrices[at] = bad;
+        EXPECT_EQ(FirstNonInvertibleAffine(matrices), at) << count << " " << at;
+        // A later rejected matrix does not hide the first.
+        if (at + 1 < count) matrices[count - 1] = zero;
+        EXPECT_EQ(FirstNonInvertibleAffine(matrices), at) << count << " " << at;
+      }
+    }
+  }
+  // Accepted whatever their scale or handedness: the bound scales as det does.
+  Affine34d tiny = 1e-90 * valid(5);
+  Affine34d huge = 1e90 * valid(6);
+  Affine34d mirrored = valid(7);
+  mirrored.col(0) = -mirrored.col(0);
+  Affine34d sheared = valid(8);
+  sheared.col(1) += 3 * sheared.col(0);
+  const std::vector<Affine34d> accepted = {tiny, huge, mirrored, sheared, valid(9)};
+  for (const Affine34d& m : accepted) EXPECT_TRUE(IsInvertibleAffine(m));
+  EXPECT_EQ(FirstNonInvertibleAffine(accepted), accepted.size());
+  EXPECT_EQ(FirstNonInvertibleAffine({}), 0u);
+}
+
 }  // namespace
 }  // namespace motionlod::core
