@@ -73,13 +73,13 @@ void AppendRigid(std::vector<float>& out, float angle, float x, float y, float z
   out.insert(out.end(), matrix, matrix + 12);
 }
 
-LevelSetData MakeRigidSample() {
-  LevelSetData data = MakeSample(2);
+LevelSetData MakeRigidSample(uint32_t frames = 2) {
+  LevelSetData data = MakeSample(frames);
   data.flags = kLevelSetFlagRigid;
   for (size_t l = 0; l < data.levels.size(); ++l) {
     LevelData& level = data.levels[l];
     level.matrices.clear();
-    for (size_t t = 0; t < 2; ++t) {
+    for (size_t t = 0; t < frames; ++t) {
       for (size_t s = 0; s < level.kept_joints.size(); ++s) {
         AppendRigid(level.matrices, 0.3f * t + 0.7f * s, 1.0f * s, -2.0f * t, 0.5f);
       }
@@ -426,6 +426,32 @@ TEST(ValidateLevelSet, RejectsReflectionInRigidLevelSet) {
   data.levels[0].matrices[4] = -data.levels[0].matrices[4];
   data.levels[0].matrices[8] = -data.levels[0].matrices[8];
   EXPECT_THAT(ValidateLevelSet(data).message(), HasSubstr("flagged rigid"));
+}
+
+// The rigid check takes matrices two at a time, with an odd one last: a reflection at
+// every position of every level, first or second of its pair or alone, is the one named
+// (3 frames: levels of an odd number of slots have an odd number of matrices).
+TEST(ValidateLevelSet, RejectsAReflectionWhereverItSitsInARigidLevelSet) {
+  const LevelSetData sample = MakeRigidSample(3);
+  ASSERT_TRUE(ValidateLevelSet(sample).ok());
+  bool odd = false;
+  for (size_t l = 0; l < sample.levels.size(); ++l) {
+    odd = odd || sample.levels[l].matrices.size() / kMatrixFloats % 2 == 1;
+    const size_t slots = sample.levels[l].kept_joints.size();
+    const size_t count = sample.levels[l].matrices.size() / kMatrixFloats;
+    for (size_t matrix = 0; matrix < count; ++matrix) {
+      LevelSetData data = sample;
+      float* k = data.levels[l].matrices.data() + matrix * kMatrixFloats;
+      for (int row = 0; row < 3; ++row) k[4 * row] = -k[4 * row];
+      const Status status = ValidateLevelSet(data);
+      EXPECT_THAT(status.message(),
+                  HasSubstr("level " + std::to_string(l) + ": K'(frame " +
+                            std::to_string(matrix / slots) + ", slot " +
+                            std::to_string(matrix % slots) + ") is not a rotation"))
+          << l << " " << matrix;
+    }
+  }
+  EXPECT_TRUE(odd);
 }
 
 // Unit columns that are not orthogonal: only the off-diagonal entries of A^T A show it.
