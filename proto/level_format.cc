@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <cstring>
 #include <limits>
+#include <optional>
 #include <type_traits>
 #include <utility>
 
@@ -300,12 +301,18 @@ inline bool AreRotations(const float* first, const float* second) {
 
 inline bool IsRotation(const float* k) { return AreRotations(k, k); }
 
-std::string CheckMatrices(size_t l, uint32_t frame_count, size_t m, bool rigid,
-                          std::span<const float> matrices) {
+std::string CheckMatrixCount(size_t l, uint32_t frame_count, size_t m,
+                             std::span<const float> matrices) {
   const uint64_t expected = uint64_t{frame_count} * m * kMatrixFloats;  // < 2^54
   if (matrices.size() != expected) {
     return StrCat("level ", l, " has ", matrices.size(), " matrix floats; T x m x 12 = ", expected);
   }
+  return {};
+}
+
+// The values of a level's matrices (m per frame, a count CheckMatrixCount accepted): finite,
+// and rotations plus translations where the level set is rigid.
+std::string CheckMatrixValues(size_t l, size_t m, bool rigid, std::span<const float> matrices) {
   // One branch-free pass, an OR of integer compares, in the widest vectors this CPU has
   // (base/simd.h; a running AND of bools did not vectorise); locate the culprit only on
   // failure.
@@ -347,8 +354,13 @@ std::string CheckMatrices(size_t l, uint32_t frame_count, size_t m, bool rigid,
   return {};
 }
 
+// Whether CheckLevelSet checks the values of the levels' matrices (most of its work), or
+// leaves them to CheckMatrixValues: writing a level set needs only the rest.
+enum class MatrixValues { kChecked, kLeftOut };
+
 std::string CheckLevelSet(const LevelSetSource& source, bool allow_unknown_flags,
-                          const PieceRunner& run = {}) {
+                          const PieceRunner& run = {},
+                          MatrixValues matrix_values = MatrixValues::kChecked) {
   if (!allow_unknown_flags && (source.flags & ~kKnownLevelSetFlags) != 0) {
     return StrCat("unknown flag bits ", source.flags & ~kKnownLevelSetFlags);
   }
@@ -380,7 +392,10 @@ std::string CheckLevelSet(const LevelSetSource& source, bool allow_unknown_flags
     if (level_problem.empty()) level_problem = CheckFigures(l, level.figures);
     if (level_problem.empty()) {
       level_problem =
-          CheckMatrices(l, source.frame_count, level.kept_joints.size(), rigid, level.matrices);
+          CheckMatrixCount(l, source.frame_count, level.kept_joints.size(), level.matrices);
+    }
+    if (level_problem.empty() && matrix_values == MatrixValues::kChecked) {
+      level_problem = CheckMatrixValues(l, level.kept_joints.size(), rigid, level.matrices);
     }
   });
   for (std::string& level_problem : problems) {
@@ -919,9 +934,30 @@ namespace internal {
 StatusOr<std::string> EncodeLevelSetWithOptions(const LevelSetData& data,
                                                 const WriterOptions& options,
                                                 const PieceRunner& run) {
-  Status status = ValidateLevelSet(data, run);
-  if (!status.ok()) return status;
-  return EncodeSource(SourceOf(data), options);
+  const LevelSetSource source = SourceOf(data);
+  std::string problem =
+      CheckLevelSet(source, /*allow_unknown_flags=*/false, run, MatrixValues::kLeftOut);
+  if (!problem.empty()) return InvalidArgument(std::move(problem));
+  // The matrices' values are checked beside the writing and its checksum, which need only
+  // what was checked above (a level set that then fails is dropped): on two threads the
+  // checks no longer come before the file's one serial pass. Piece 0 is the writing, the
+  // others a level's values each.
+  const bool rigid = (source.flags & kLevelSetFlagRigid) != 0;
+  std::optional<StatusOr<std::string>> encoded;
+  std::vector<std::string> problems(source.levels.size());
+  RunPieces(run, 1 + static_cast<int>(source.levels.size()), [&](int piece) {
+    if (piece == 0) {
+      encoded = EncodeSource(source, options);
+      return;
+    }
+    const LevelSource& level = source.levels[piece - 1];
+    problems[piece - 1] =
+        CheckMatrixValues(piece - 1, level.kept_joints.size(), rigid, level.matrices);
+  });
+  for (std::string& level_problem : problems) {
+    if (!level_problem.empty()) return InvalidArgument(std::move(level_problem));
+  }
+  return std::move(*encoded);
 }
 
 }  // namespace internal

@@ -79,7 +79,7 @@ struct WriterOptions {
   std::vector<ExtraSection> extra_sections;       // appended after the known sections
 };
 
-// Validates `data` (ValidateLevelSet, on `run`), then writes it as `options` say.
+// Validates `data` (as ValidateLevelSet, on `run`) and writes it as `options` say.
 StatusOr<std::string> EncodeLevelSetWithOptions(const LevelSetData& data,
                                                 const WriterOptions& options,
                                                 const PieceRunner& run = {});

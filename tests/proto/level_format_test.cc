@@ -416,7 +416,9 @@ TEST(ValidateLevelSet, RejectsEachInvalidField) {
     const Status status = ValidateLevelSet(data);
     EXPECT_EQ(status.code(), StatusCode::kInvalidArgument) << c.name;
     EXPECT_THAT(status.message(), HasSubstr(c.message)) << c.name;
+    // Encoding checks the matrices' values beside the writing, and reports the same.
     EXPECT_EQ(EncodeLevelSet(data).status().code(), StatusCode::kInvalidArgument) << c.name;
+    EXPECT_EQ(EncodeLevelSet(data).status().message(), status.message()) << c.name;
   }
 }
 
