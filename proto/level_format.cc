@@ -935,8 +935,9 @@ StatusOr<std::string> EncodeLevelSetWithOptions(const LevelSetData& data,
                                                 const WriterOptions& options,
                                                 const PieceRunner& run) {
   const LevelSetSource source = SourceOf(data);
+  // (On this thread: without the values, a level's check is too short to hand to another.)
   std::string problem =
-      CheckLevelSet(source, /*allow_unknown_flags=*/false, run, MatrixValues::kLeftOut);
+      CheckLevelSet(source, /*allow_unknown_flags=*/false, {}, MatrixValues::kLeftOut);
   if (!problem.empty()) return InvalidArgument(std::move(problem));
   // The matrices' values are checked beside the writing and its checksum, which need only
   // what was checked above (a level set that then fails is dropped): on two threads the
