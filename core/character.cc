@@ -97,7 +97,9 @@ Status ValidateRawCharacter(const RawCharacter& raw) {
     }
     const Affine34d& m = s.bind_world[j];
     if (!m.allFinite()) return InvalidArgument(JointLabel(s, jj) + " has a non-finite bind matrix");
-    if (!IsInvertibleAffine(m)) return InvalidArgument(JointLabel(s, jj) + " has a singular bind matrix");
+    if (!IsInvertibleAffine(m)) {
+      return InvalidArgument(JointLabel(s, jj) + " has a singular bind matrix");
+    }
   }
 
   const size_t p = k.positions.size();

@@ -54,7 +54,9 @@ size_t FirstNonInvertibleAffine(std::span<const Affine34d> matrices) {
     if (whole == count) return count;
     // The last one to three, with identities after them.
     Affine34d last[4];
-    for (size_t i = 0; i < 4; ++i) last[i] = whole + i < count ? matrices[whole + i] : IdentityAffine();
+    for (size_t i = 0; i < 4; ++i) {
+      last[i] = whole + i < count ? matrices[whole + i] : IdentityAffine();
+    }
     const int bad = FirstNonInvertibleOfFour(last[0].data());
     return bad < 4 ? whole + bad : count;
   });
@@ -63,7 +65,6 @@ size_t FirstNonInvertibleAffine(std::span<const Affine34d> matrices) {
 bool IsInvertibleAffine(const Affine34d& matrix) {
   return FirstNonInvertibleAffine(std::span<const Affine34d>(&matrix, 1)) == 1;
 }
-
 
 Status ValidateMotion(const Motion& motion, const Character& character) {
   if (!(motion.fps > 0) || !std::isfinite(motion.fps)) {
@@ -82,7 +83,8 @@ Status ValidateMotion(const Motion& motion, const Character& character) {
   }
   const size_t bad = FirstNonInvertibleAffine(motion.joint_world);
   if (bad == motion.joint_world.size()) return Status::Ok();
-  const int t = static_cast<int>(bad / motion.joint_count), j = static_cast<int>(bad % motion.joint_count);
+  const int t = static_cast<int>(bad / motion.joint_count),
+            j = static_cast<int>(bad % motion.joint_count);
   const std::string where =
       "frame " + std::to_string(t) + ", joint '" + character.skeleton().joint_names[j] + "'";
   return InvalidArgument((motion.joint_world[bad].allFinite() ? "singular joint matrix at "

@@ -381,7 +381,8 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
   for (int k = 0; k < n; ++k) {
     const Affine34d inverse = InverseAffine(c.skeleton().bind_world[k]);
     for (int i = 0; i < 3; ++i) {
-      inverse_bind_rows[3 * k + i] = Lanes4{inverse(i, 0), inverse(i, 1), inverse(i, 2), inverse(i, 3)};
+      inverse_bind_rows[3 * k + i] =
+          Lanes4{inverse(i, 0), inverse(i, 1), inverse(i, 2), inverse(i, 3)};
     }
   }
   d.kt.resize(4 * n, 3 * frames);
@@ -393,7 +394,8 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
         const double* m = motion.world(t, k).data();  // column-major 3x4
         const Lanes4* inverse_rows = &inverse_bind_rows[3 * k];
         for (int r = 0; r < 3; ++r) {
-          Lanes4 row = m[r] * inverse_rows[0] + m[3 + r] * inverse_rows[1] + m[6 + r] * inverse_rows[2];
+          Lanes4 row =
+              m[r] * inverse_rows[0] + m[3 + r] * inverse_rows[1] + m[6 + r] * inverse_rows[2];
           row[3] += m[9 + r];
           *AsLanes4(frame + r * stride + 4 * k) = row;
         }
@@ -502,9 +504,13 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
     for (; col + 4 <= cols; col += 4) {
       for (int k = 0; k < n; ++k) {
         Lanes4 columns[4], rows[4];
-        for (int f = 0; f < 4; ++f) columns[f] = *AsLanes4(d.kt.data() + (col + f) * kt_stride + 4 * k);
+        for (int f = 0; f < 4; ++f) {
+          columns[f] = *AsLanes4(d.kt.data() + (col + f) * kt_stride + 4 * k);
+        }
         Transpose4(columns, rows);
-        for (int a = 0; a < 4; ++a) *AsLanes4(d.ktt.data() + (4 * k + a) * ktt_stride + col) = rows[a];
+        for (int a = 0; a < 4; ++a) {
+          *AsLanes4(d.ktt.data() + (4 * k + a) * ktt_stride + col) = rows[a];
+        }
       }
     }
     for (; col < cols; ++col) {

@@ -277,8 +277,8 @@ inline bool AreRotations(const float* first, const float* second) {
   Floats8 r[3];  // (not lambdas returning vectors: a 32-byte vector changes the ABI)
   for (int i = 0; i < 3; ++i) {
     r[i] = __builtin_shufflevector(*reinterpret_cast<const UnalignedFloats4*>(first + 4 * i),
-                                   *reinterpret_cast<const UnalignedFloats4*>(second + 4 * i), 0,
-                                   1, 2, 3, 4, 5, 6, 7);
+                                   *reinterpret_cast<const UnalignedFloats4*>(second + 4 * i), 0, 1,
+                                   2, 3, 4, 5, 6, 7);
   }
   // next[i], after[i]: lane a of r[i] moved to lane a + 1 and a + 2 (mod 3) within each half,
   // lanes 3 and 7 in place.

@@ -446,10 +446,10 @@ TEST(ValidateLevelSet, RejectsAReflectionWhereverItSitsInARigidLevelSet) {
       float* k = data.levels[l].matrices.data() + matrix * kMatrixFloats;
       for (int row = 0; row < 3; ++row) k[4 * row] = -k[4 * row];
       const Status status = ValidateLevelSet(data);
-      EXPECT_THAT(status.message(),
-                  HasSubstr("level " + std::to_string(l) + ": K'(frame " +
-                            std::to_string(matrix / slots) + ", slot " +
-                            std::to_string(matrix % slots) + ") is not a rotation"))
+      EXPECT_THAT(
+          status.message(),
+          HasSubstr("level " + std::to_string(l) + ": K'(frame " + std::to_string(matrix / slots) +
+                    ", slot " + std::to_string(matrix % slots) + ") is not a rotation"))
           << l << " " << matrix;
     }
   }
