@@ -53,6 +53,37 @@ inline void AddTraceForms(const double* a, const double* b, Eigen::Index stride,
 // The sum of AddTraceForms' four lanes.
 inline double LaneSum(const Lanes4& lanes) { return (lanes[0] + lanes[1]) + (lanes[2] + lanes[3]); }
 
+// The transpose of `from`'s rows taken in blocks of four, the first kKept rows of each (4:
+// all of them; 3: a 4x3 block without its translation row): row 4b + a of `from` becomes
+// column kKept b + a of `to`, which has from.cols() rows. Four columns at a time, each
+// block's four rows of them (four contiguous doubles) are transposed as whole vectors
+// (Transpose4): element by element, every element was a load and a store of its own, and
+// reading a row of `from` touches one cache line per column. Inline, so that a caller's
+// AVX2 version (base/simd.h) runs it 256 bits wide.
+template <int kKept>
+inline void TransposeRowBlocks(const MatrixXd& from, MatrixXd& to) {
+  const Eigen::Index blocks = from.rows() / 4, cols = from.cols();
+  const Eigen::Index from_stride = from.rows(), to_stride = to.rows();
+  Eigen::Index col = 0;
+  for (; col + 4 <= cols; col += 4) {
+    for (Eigen::Index b = 0; b < blocks; ++b) {
+      Lanes4 columns[4], rows[4];
+      for (int f = 0; f < 4; ++f) {
+        columns[f] = *AsLanes4(from.data() + (col + f) * from_stride + 4 * b);
+      }
+      Transpose4(columns, rows);
+      for (int a = 0; a < kKept; ++a) {
+        *AsLanes4(to.data() + (kKept * b + a) * to_stride + col) = rows[a];
+      }
+    }
+  }
+  for (; col < cols; ++col) {
+    for (Eigen::Index b = 0; b < blocks; ++b) {
+      for (int a = 0; a < kKept; ++a) to(col, kKept * b + a) = from(4 * b + a, col);
+    }
+  }
+}
+
 }  // namespace
 
 const char* VariantName(Variant variant) {
@@ -494,29 +525,8 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
     q.topLeftCorner<3, 3>() += d.beta_fit * moment.normal_moment;
     d.pair_fit.push_back(q);
   }
-  // Kt^T as 4x4 blocks transposed in registers (Transpose4): four columns of a joint's
-  // four rows in, four rows of its columns out, each one vector.
   d.ktt.resize(3 * frames, 4 * n);
-  RunWithWidestSimd([&] {
-    const Eigen::Index kt_stride = d.kt.rows(), ktt_stride = d.ktt.rows();
-    const int cols = 3 * frames;
-    int col = 0;
-    for (; col + 4 <= cols; col += 4) {
-      for (int k = 0; k < n; ++k) {
-        Lanes4 columns[4], rows[4];
-        for (int f = 0; f < 4; ++f) {
-          columns[f] = *AsLanes4(d.kt.data() + (col + f) * kt_stride + 4 * k);
-        }
-        Transpose4(columns, rows);
-        for (int a = 0; a < 4; ++a) {
-          *AsLanes4(d.ktt.data() + (4 * k + a) * ktt_stride + col) = rows[a];
-        }
-      }
-    }
-    for (; col < cols; ++col) {
-      for (int row = 0; row < 4 * n; ++row) d.ktt(col, row) = d.kt(row, col);
-    }
-  });
+  RunWithWidestSimd([&] { TransposeRowBlocks<4>(d.kt, d.ktt); });
   // F^T = Kt^T Q, one pair at a time: F_k += Q_kl Kt_l and F_l += Q_kl^T Kt_k, each a
   // product of 4 contiguous columns (a sparse-dense product would update one coefficient
   // at a time); in pieces of frames (rows), each in the widest vectors this CPU has, and
@@ -1530,30 +1540,11 @@ StatusOr<VariantSolution> SolveVariant(const PreparedMotion::Impl& d, const Redu
         // The right-hand sides transposed, as SolveTransposed takes them: b_T^T - x_N^T G_TN^T.
         // G_TT and G_TN keep G's block sparsity: G_TT is a block matrix of 1x1 blocks, and
         // each coefficient of G_TN subtracts one contiguous column of all frames.
-        // Transposed copies are made column by column of x: reading a row of x would touch
-        // one cache line per column, every line of a long motion's x for each row. Four
-        // columns at a time, each slot's four rows of them (four contiguous doubles) are
-        // transposed as whole vectors (Transpose4): element by element, every element was a
-        // load and a store of its own.
+        // x_N^T: the rotations' rows of x, transposed (TransposeRowBlocks).
         MatrixXd x_nt(cols, 3 * m);
-        const Eigen::Index x_stride = x.rows(), nt_stride = x_nt.rows();
-        const double* x_data = x.data();
-        double* nt_data = x_nt.data();
-        int col = 0;
-        for (; col + 4 <= cols; col += 4) {
-          for (int s = 0; s < m; ++s) {
-            Lanes4 rows[4], columns[4];
-            for (int f = 0; f < 4; ++f) rows[f] = *AsLanes4(x_data + (col + f) * x_stride + 4 * s);
-            Transpose4(rows, columns);
-            for (int r = 0; r < 3; ++r)
-              *AsLanes4(nt_data + (3 * s + r) * nt_stride + col) = columns[r];
-          }
-        }
-        for (; col < cols; ++col) {
-          for (int s = 0; s < m; ++s) {
-            for (int r = 0; r < 3; ++r) x_nt(col, 3 * s + r) = x(4 * s + r, col);
-          }
-        }
+        TransposeRowBlocks<3>(x, x_nt);
+        const Eigen::Index nt_stride = x_nt.rows();
+        const double* nt_data = x_nt.data();
         BlockSymmetric<1> g_tt(m);
         // Row s of G_TN as its couplings to the slots u of its blocks (G_su(3, 0..2): the
         // diagonal block first, then the others in G's order), so that each slot's
