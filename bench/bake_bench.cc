@@ -290,20 +290,8 @@ StatusOr<Stages> BakeEveryLevel(const core::RawCharacter& raw, const io::Asset& 
   stages.solve = SecondsSince(begin);
 
   begin = Clock::now();
-  proto::LevelSetData data;
-  data.variant_name = core::VariantName(variant);
-  data.flags = core::IsRigid(variant) ? proto::kLevelSetFlagRigid : 0;
-  data.algorithm_version = core::kAlgorithmVersion;
-  data.frame_count = static_cast<uint32_t>(motion->frame_count);
-  data.fps = motion->fps;
-  data.settings_hash = settings.Hash();
-  data.joint_names = (*character)->skeleton().joint_names;
-  data.parents.assign((*character)->skeleton().parents.begin(),
-                      (*character)->skeleton().parents.end());
-  data.levels.resize(counts.size());
-  pool.Run(static_cast<int>(counts.size()),
-           [&](int index) { data.levels[index] = pipeline::LevelDataOf(results.at(counts[index])); });
-  auto encoded = proto::EncodeLevelSet(data, pool.Runner());
+  auto encoded = pipeline::EncodeSolvedLevels(**character, *motion, settings, {}, counts, results,
+                                              pool.Runner());
   if (!encoded.ok()) return encoded.status();
   benchmark::DoNotOptimize(encoded->data());
   stages.encode = SecondsSince(begin);

@@ -450,20 +450,8 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
   if (Cancelled(cancel)) return CancelledStatus();
 
   report_progress(0.96, "encode");
-  proto::LevelSetData data;
-  data.variant_name = core::VariantName(request.settings.variant);
-  data.flags = core::IsRigid(request.settings.variant) ? proto::kLevelSetFlagRigid : 0;
-  data.algorithm_version = core::kAlgorithmVersion;
-  data.frame_count = static_cast<uint32_t>(motion.frame_count);
-  data.fps = motion.fps;
-  data.source_hash = request.source_hash;
-  data.settings_hash = request.settings.Hash();
-  data.joint_names = character.skeleton().joint_names;
-  data.parents.assign(character.skeleton().parents.begin(), character.skeleton().parents.end());
-  data.levels.resize(counts.size());
-  pool.Run(static_cast<int>(counts.size()),
-           [&](int index) { data.levels[index] = LevelDataOf(solved.at(counts[index])); });
-  auto encoded = proto::EncodeLevelSet(data, pool.Runner());
+  auto encoded = EncodeSolvedLevels(character, motion, request.settings, request.source_hash,
+                                    counts, solved, pool.Runner());
   if (!encoded.ok()) return encoded.status();
   const double bake_seconds = SecondsSince(start);
 

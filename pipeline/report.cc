@@ -37,22 +37,47 @@ json ErrorsJson(const core::LevelErrors& e) {
 
 }  // namespace
 
-proto::LevelData LevelDataOf(const core::LevelResult& result) {
-  proto::LevelData level;
-  level.kept_joints.assign(result.skeleton.kept_joints.begin(), result.skeleton.kept_joints.end());
-  level.joint_map.assign(result.skeleton.joint_to_slot.begin(), result.skeleton.joint_to_slot.end());
-  const core::LevelErrors& errors = result.optimized;
-  level.figures.max_vertex_error_pct = static_cast<float>(errors.max_vertex_error_pct);
-  level.figures.mean_vertex_error_pct = static_cast<float>(errors.mean_vertex_error_pct);
-  level.figures.mean_normal_error_deg = static_cast<float>(errors.mean_normal_error_deg);
-  level.figures.mean_E = static_cast<float>(errors.mean_e);
-  level.figures.max_px_for_1px_error =
-      static_cast<float>(core::MaxPixelHeightForBudget(errors.max_vertex_error_pct / 100.0, 1.0));
-  // The level file's row-major 3x4s are the result's own layout.
+StatusOr<std::string> EncodeSolvedLevels(const core::Character& character,
+                                         const core::Motion& motion,
+                                         const core::SolveSettings& settings,
+                                         const std::array<uint8_t, 32>& source_hash,
+                                         const std::vector<int>& counts,
+                                         const std::map<int, core::LevelResult>& levels,
+                                         const PieceRunner& run) {
+  proto::LevelSetRef set;
+  set.variant_name = core::VariantName(settings.variant);
+  set.flags = core::IsRigid(settings.variant) ? proto::kLevelSetFlagRigid : 0;
+  set.algorithm_version = core::kAlgorithmVersion;
+  set.frame_count = static_cast<uint32_t>(motion.frame_count);
+  set.fps = motion.fps;
+  set.source_hash = source_hash;
+  set.settings_hash = settings.Hash();
+  const core::RawSkeleton& skeleton = character.skeleton();
+  set.joint_names.assign(skeleton.joint_names.begin(), skeleton.joint_names.end());
+  set.parents = skeleton.parents;
+  // The joint lists in the file's integer type (m + n entries a level); the matrices in place.
   static_assert(sizeof(core::RowMajorAffine34f) == proto::kMatrixFloats * sizeof(float));
-  const float* first = result.matrices.empty() ? nullptr : result.matrices.front().data();
-  level.matrices.assign(first, first + result.matrices.size() * proto::kMatrixFloats);
-  return level;
+  std::vector<std::vector<uint16_t>> joint_lists(2 * counts.size());
+  for (size_t l = 0; l < counts.size(); ++l) {
+    const core::LevelResult& result = levels.at(counts[l]);
+    std::vector<uint16_t>& kept = joint_lists[2 * l];
+    std::vector<uint16_t>& map = joint_lists[2 * l + 1];
+    kept.assign(result.skeleton.kept_joints.begin(), result.skeleton.kept_joints.end());
+    map.assign(result.skeleton.joint_to_slot.begin(), result.skeleton.joint_to_slot.end());
+    const core::LevelErrors& errors = result.optimized;
+    proto::LevelFigures figures;
+    figures.max_vertex_error_pct = static_cast<float>(errors.max_vertex_error_pct);
+    figures.mean_vertex_error_pct = static_cast<float>(errors.mean_vertex_error_pct);
+    figures.mean_normal_error_deg = static_cast<float>(errors.mean_normal_error_deg);
+    figures.mean_E = static_cast<float>(errors.mean_e);
+    figures.max_px_for_1px_error =
+        static_cast<float>(core::MaxPixelHeightForBudget(errors.max_vertex_error_pct / 100.0, 1.0));
+    const float* first = result.matrices.empty() ? nullptr : result.matrices.front().data();
+    set.levels.push_back(
+        {kept, map, figures,
+         std::span<const float>(first, result.matrices.size() * proto::kMatrixFloats)});
+  }
+  return proto::EncodeLevelSet(set, run);
 }
 
 json RankingTable(const core::Character& character, const core::JointRanking& ranking) {

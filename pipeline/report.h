@@ -2,6 +2,7 @@
 // documented in docs/report.md.
 #pragma once
 
+#include <array>
 #include <map>
 #include <string>
 #include <vector>
@@ -45,9 +46,18 @@ struct ReportInputs {
   std::vector<std::string> warnings;
 };
 
-// A solved level as the level file holds it: kept joints, joint map, the optimised
-// figures and the matrices row-major.
-proto::LevelData LevelDataOf(const core::LevelResult& result);
+// The level file of the solved `levels` listed in `counts` (finest first): header and
+// skeleton from the character, motion and settings, each level's kept joints, joint map,
+// optimised figures and matrices. The matrices are the results' own row-major 3x4s, read
+// in place: encoding copies them once, straight into the file. `run`: where the encoding's
+// checks run (proto::EncodeLevelSet).
+StatusOr<std::string> EncodeSolvedLevels(const core::Character& character,
+                                         const core::Motion& motion,
+                                         const core::SolveSettings& settings,
+                                         const std::array<uint8_t, 32>& source_hash,
+                                         const std::vector<int>& counts,
+                                         const std::map<int, core::LevelResult>& levels,
+                                         const PieceRunner& run);
 
 nlohmann::json BuildReport(const ReportInputs& inputs);
 

@@ -81,47 +81,9 @@ bool IsFiniteBits(float value) {
 // The content of a level set as spans, whether it comes from LevelSetData (encode),
 // from a decoded buffer (validation after decode) or from a view (extract).
 
-struct LevelSource {
-  std::span<const uint16_t> kept_joints;
-  std::span<const uint16_t> joint_map;
-  LevelFigures figures;
-  std::span<const float> matrices;
-};
-
-struct LevelSetSource {
-  uint32_t flags = 0;
-  uint32_t algorithm_version = 0;
-  uint32_t frame_count = 0;
-  double fps = 0;
-  std::array<uint8_t, 32> source_hash{};
-  uint64_t settings_hash = 0;
-  std::string_view variant_name;
-  std::vector<std::string_view> joint_names;
-  std::span<const int32_t> parents;
-  std::vector<LevelSource> levels;
-};
-
-LevelSetSource SourceOf(const LevelSetData& data) {
-  LevelSetSource source;
-  source.flags = data.flags;
-  source.algorithm_version = data.algorithm_version;
-  source.frame_count = data.frame_count;
-  source.fps = data.fps;
-  source.source_hash = data.source_hash;
-  source.settings_hash = data.settings_hash;
-  source.variant_name = data.variant_name;
-  source.joint_names.assign(data.joint_names.begin(), data.joint_names.end());
-  source.parents = data.parents;
-  source.levels.reserve(data.levels.size());
-  for (const LevelData& level : data.levels) {
-    source.levels.push_back({level.kept_joints, level.joint_map, level.figures, level.matrices});
-  }
-  return source;
-}
-
 // The header and skeleton of `view`, without levels.
-LevelSetSource HeaderSourceOf(const LevelSetView& view) {
-  LevelSetSource source;
+LevelSetRef HeaderRefOf(const LevelSetView& view) {
+  LevelSetRef source;
   source.flags = view.flags() & kKnownLevelSetFlags;
   source.algorithm_version = view.algorithm_version();
   source.frame_count = view.frame_count();
@@ -134,7 +96,7 @@ LevelSetSource HeaderSourceOf(const LevelSetView& view) {
   return source;
 }
 
-LevelSource SourceOf(const LevelView& level) {
+LevelRef RefOf(const LevelView& level) {
   return {level.kept_joints(), level.joint_map(), level.figures(), level.matrices()};
 }
 
@@ -152,7 +114,7 @@ std::string CheckName(std::string_view what, std::string_view name, bool allow_e
   return {};
 }
 
-std::string CheckSkeleton(const LevelSetSource& source) {
+std::string CheckSkeleton(const LevelSetRef& source) {
   const size_t n = source.parents.size();
   if (n == 0) return "the skeleton has no joint";
   if (n > kMaxJointCount) {
@@ -358,7 +320,7 @@ std::string CheckMatrixValues(size_t l, size_t m, bool rigid, std::span<const fl
 // leaves them to CheckMatrixValues: writing a level set needs only the rest.
 enum class MatrixValues { kChecked, kLeftOut };
 
-std::string CheckLevelSet(const LevelSetSource& source, bool allow_unknown_flags,
+std::string CheckLevelSet(const LevelSetRef& source, bool allow_unknown_flags,
                           const PieceRunner& run = {},
                           MatrixValues matrix_values = MatrixValues::kChecked) {
   if (!allow_unknown_flags && (source.flags & ~kKnownLevelSetFlags) != 0) {
@@ -383,7 +345,7 @@ std::string CheckLevelSet(const LevelSetSource& source, bool allow_unknown_flags
   std::vector<std::string> problems(source.levels.size());
   RunPieces(run, static_cast<int>(source.levels.size()), [&](int piece) {
     const auto l = static_cast<size_t>(piece);
-    const LevelSource& level = source.levels[l];
+    const LevelRef& level = source.levels[l];
     std::string& level_problem = problems[l];
     level_problem = CheckKeptJoints(l, source.parents.size(), level.kept_joints);
     if (level_problem.empty()) {
@@ -420,13 +382,13 @@ struct Layout {
   uint64_t file_size = 0;
 };
 
-uint64_t JointNamesBytes(const LevelSetSource& source) {
+uint64_t JointNamesBytes(const LevelSetRef& source) {
   uint64_t bytes = 0;
   for (std::string_view name : source.joint_names) bytes += 2 + uint64_t{name.size()};
   return bytes;
 }
 
-Layout PlanLayout(const LevelSetSource& source, const WriterOptions& options) {
+Layout PlanLayout(const LevelSetRef& source, const WriterOptions& options) {
   const uint64_t n = source.parents.size();
   const uint64_t frame_count = source.frame_count;
   Layout layout;
@@ -462,7 +424,7 @@ Layout PlanLayout(const LevelSetSource& source, const WriterOptions& options) {
 // Writes the planned file into out[0, layout.file_size), which the caller has sized, and
 // zeroed where `zeroed` (a std::string's resize already did: a second pass over a long
 // clip's megabytes is not free).
-void WriteLevelSet(const LevelSetSource& source, const WriterOptions& options, const Layout& layout,
+void WriteLevelSet(const LevelSetRef& source, const WriterOptions& options, const Layout& layout,
                    std::byte* out, bool zeroed) {
   if (!zeroed) std::fill_n(out, layout.file_size, std::byte{0});  // padding, reserved fields
 
@@ -514,7 +476,7 @@ void WriteLevelSet(const LevelSetSource& source, const WriterOptions& options, c
   write_bytes(source.parents.data(), source.parents.size_bytes());
   {
     std::byte* record = out + section->offset;
-    for (const LevelSource& level : source.levels) {
+    for (const LevelRef& level : source.levels) {
       Store<uint32_t>(record + internal::kRecordOffsetKeptCount,
                       static_cast<uint32_t>(level.kept_joints.size()));
       const float figures[5] = {level.figures.max_vertex_error_pct,
@@ -528,7 +490,7 @@ void WriteLevelSet(const LevelSetSource& source, const WriterOptions& options, c
     }
     ++section;
   }
-  for (const LevelSource& level : source.levels) {
+  for (const LevelRef& level : source.levels) {
     write_bytes(level.kept_joints.data(), level.kept_joints.size_bytes());
     write_bytes(level.joint_map.data(), level.joint_map.size_bytes());
     write_bytes(level.matrices.data(), level.matrices.size_bytes());
@@ -544,7 +506,7 @@ void WriteLevelSet(const LevelSetSource& source, const WriterOptions& options, c
   Store<uint64_t>(trailer + 8, checksum);
 }
 
-StatusOr<std::string> EncodeSource(const LevelSetSource& source, const WriterOptions& options) {
+StatusOr<std::string> EncodeSource(const LevelSetRef& source, const WriterOptions& options) {
   const Layout layout = PlanLayout(source, options);
   std::string out;
   if (layout.file_size > out.max_size()) {
@@ -743,7 +705,7 @@ StatusOr<LevelSetView> LevelSetDecoder::Decode(std::span<const std::byte> bytes,
                             " records of ", level_record_size));
   }
 
-  LevelSetSource source;
+  LevelSetRef source;
   source.flags = flags;
   source.algorithm_version = Load<uint32_t>(data + internal::kOffsetAlgorithmVersion);
   source.frame_count = frame_count;
@@ -798,7 +760,7 @@ StatusOr<LevelSetView> LevelSetDecoder::Decode(std::span<const std::byte> bytes,
                               matrices.size, " bytes; expected ", 2 * uint64_t{m}, ", ", 2 * n,
                               " and ", matrix_bytes, " for m = ", m, ", T = ", frame_count));
     }
-    LevelSource& level = source.levels[l];
+    LevelRef& level = source.levels[l];
     level.kept_joints = {reinterpret_cast<const uint16_t*>(data + kept.offset), m};
     level.joint_map = {reinterpret_cast<const uint16_t*>(data + map.offset), n};
     level.matrices = {reinterpret_cast<const float*>(data + matrices.offset),
@@ -836,8 +798,26 @@ StatusOr<LevelSetView> LevelSetDecoder::Decode(std::span<const std::byte> bytes,
 // -----------------------------------------------------------------------------------
 // Public entry points.
 
+LevelSetRef RefOf(const LevelSetData& data) {
+  LevelSetRef source;
+  source.flags = data.flags;
+  source.algorithm_version = data.algorithm_version;
+  source.frame_count = data.frame_count;
+  source.fps = data.fps;
+  source.source_hash = data.source_hash;
+  source.settings_hash = data.settings_hash;
+  source.variant_name = data.variant_name;
+  source.joint_names.assign(data.joint_names.begin(), data.joint_names.end());
+  source.parents = data.parents;
+  source.levels.reserve(data.levels.size());
+  for (const LevelData& level : data.levels) {
+    source.levels.push_back({level.kept_joints, level.joint_map, level.figures, level.matrices});
+  }
+  return source;
+}
+
 Status ValidateLevelSet(const LevelSetData& data, const PieceRunner& run) {
-  std::string problem = CheckLevelSet(SourceOf(data), /*allow_unknown_flags=*/false, run);
+  std::string problem = CheckLevelSet(RefOf(data), /*allow_unknown_flags=*/false, run);
   if (!problem.empty()) return InvalidArgument(std::move(problem));
   return Status::Ok();
 }
@@ -868,17 +848,21 @@ StatusOr<std::vector<uint16_t>> ComputeJointMap(std::span<const int32_t> parents
 }
 
 size_t EncodedLevelSetSize(const LevelSetData& data) {
-  return static_cast<size_t>(PlanLayout(SourceOf(data), WriterOptions{}).file_size);
+  return static_cast<size_t>(PlanLayout(RefOf(data), WriterOptions{}).file_size);
 }
 
 StatusOr<std::string> EncodeLevelSet(const LevelSetData& data, const PieceRunner& run) {
+  return internal::EncodeLevelSetWithOptions(RefOf(data), WriterOptions{}, run);
+}
+
+StatusOr<std::string> EncodeLevelSet(const LevelSetRef& data, const PieceRunner& run) {
   return internal::EncodeLevelSetWithOptions(data, WriterOptions{}, run);
 }
 
 StatusOr<size_t> EncodeLevelSetInto(const LevelSetData& data, std::span<std::byte> out) {
   Status status = ValidateLevelSet(data);
   if (!status.ok()) return status;
-  const LevelSetSource source = SourceOf(data);
+  const LevelSetRef source = RefOf(data);
   const WriterOptions options;
   const Layout layout = PlanLayout(source, options);
   if (out.size() < layout.file_size) {
@@ -903,8 +887,8 @@ StatusOr<std::string> ExtractLevel(const LevelSetView& view, uint32_t l) {
     return NotFound(StrCat("level ", l, " of a level set of ", view.level_count()));
   }
   // The view was validated when decoded: write without checking again.
-  LevelSetSource source = HeaderSourceOf(view);
-  source.levels.push_back(SourceOf(view.level(l)));
+  LevelSetRef source = HeaderRefOf(view);
+  source.levels.push_back(RefOf(view.level(l)));
   return EncodeSource(source, WriterOptions{});
 }
 
@@ -931,10 +915,9 @@ LevelSetData ToLevelSetData(const LevelSetView& view) {
 
 namespace internal {
 
-StatusOr<std::string> EncodeLevelSetWithOptions(const LevelSetData& data,
+StatusOr<std::string> EncodeLevelSetWithOptions(const LevelSetRef& source,
                                                 const WriterOptions& options,
                                                 const PieceRunner& run) {
-  const LevelSetSource source = SourceOf(data);
   // (On this thread: without the values, a level's check is too short to hand to another.)
   std::string problem =
       CheckLevelSet(source, /*allow_unknown_flags=*/false, {}, MatrixValues::kLeftOut);
@@ -951,7 +934,7 @@ StatusOr<std::string> EncodeLevelSetWithOptions(const LevelSetData& data,
       encoded = EncodeSource(source, options);
       return;
     }
-    const LevelSource& level = source.levels[piece - 1];
+    const LevelRef& level = source.levels[piece - 1];
     problems[piece - 1] =
         CheckMatrixValues(piece - 1, level.kept_joints.size(), rigid, level.matrices);
   });

@@ -10,7 +10,8 @@
 // the 4x4 affine [A | b], row-major, float32:
 //   { A00 A01 A02 b0  A10 A11 A12 b1  A20 A21 A22 b2 }.
 //
-// Writing: fill a LevelSetData, EncodeLevelSet (validates, then writes).
+// Writing: fill a LevelSetData (or a LevelSetRef of views of arrays the caller already
+// has), EncodeLevelSet (validates, then writes).
 // Reading: DecodeLevelSet checks everything (checksum, structure, semantics) and returns
 // a LevelSetView whose spans point into the caller's buffer; the buffer must start on a
 // 16-byte boundary (AlignedBytes::CopyOf otherwise) and outlive the view.
@@ -106,6 +107,32 @@ struct LevelSetData {
   bool operator==(const LevelSetData&) const = default;
 };
 
+// A level set to write, by reference: LevelSetData's fields as views of the caller's
+// arrays (a bake's solved matrices, say), which must outlive the call. Encoding from it
+// copies each array once, straight into the file.
+struct LevelRef {
+  std::span<const uint16_t> kept_joints;
+  std::span<const uint16_t> joint_map;
+  LevelFigures figures;
+  std::span<const float> matrices;
+};
+
+struct LevelSetRef {
+  uint32_t flags = 0;
+  uint32_t algorithm_version = 0;
+  uint32_t frame_count = 0;
+  double fps = 0;
+  std::array<uint8_t, 32> source_hash{};
+  uint64_t settings_hash = 0;
+  std::string_view variant_name;
+  std::vector<std::string_view> joint_names;
+  std::span<const int32_t> parents;
+  std::vector<LevelRef> levels;
+};
+
+// `data` by reference: valid while `data` is alive and unchanged.
+LevelSetRef RefOf(const LevelSetData& data);
+
 // Checks every field combination of `data` against the rules of
 // docs/level-format.md ("Validation"); the message names the first offending level,
 // joint, slot or frame. kInvalidArgument when invalid. `run`: where the levels' checks
@@ -126,6 +153,8 @@ size_t EncodedLevelSetSize(const LevelSetData& data);
 // whole file; decode it in place only where its storage is 16-byte aligned
 // (AlignedBytes::CopyOf otherwise).
 StatusOr<std::string> EncodeLevelSet(const LevelSetData& data, const PieceRunner& run = {});
+// The same from views: the same checks, the same bytes.
+StatusOr<std::string> EncodeLevelSet(const LevelSetRef& data, const PieceRunner& run = {});
 
 // Validates `data`, then writes it into the first EncodedLevelSetSize(data) bytes of
 // `out` (any alignment) and returns that size. kInvalidArgument when `out` is smaller;

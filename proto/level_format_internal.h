@@ -80,7 +80,7 @@ struct WriterOptions {
 };
 
 // Validates `data` (as ValidateLevelSet, on `run`) and writes it as `options` say.
-StatusOr<std::string> EncodeLevelSetWithOptions(const LevelSetData& data,
+StatusOr<std::string> EncodeLevelSetWithOptions(const LevelSetRef& data,
                                                 const WriterOptions& options,
                                                 const PieceRunner& run = {});
 

@@ -285,6 +285,38 @@ TEST(LevelFormat, EncodedSizeIsExactAndEveryPartIsAligned) {
   EXPECT_EQ(encoded.size() % kLevelFormatAlignment, 0u);
 }
 
+TEST(LevelFormat, EncodingFromViewsWritesTheSameBytes) {
+  const LevelSetData data = MakeSample();
+  const std::string encoded = EncodeLevelSet(data).value();
+  // Views of arrays the writer does not own, as a bake has them: each level's matrices in
+  // one buffer of the whole set, the joint lists in other vectors.
+  std::vector<float> all_matrices;
+  std::vector<std::vector<uint16_t>> joint_lists;
+  for (const LevelData& level : data.levels) {
+    all_matrices.insert(all_matrices.end(), level.matrices.begin(), level.matrices.end());
+    joint_lists.push_back(level.kept_joints);
+    joint_lists.push_back(level.joint_map);
+  }
+  const std::vector<std::string> names = data.joint_names;
+  const std::vector<int32_t> parents = data.parents;
+  LevelSetRef ref = RefOf(data);
+  ref.joint_names.assign(names.begin(), names.end());
+  ref.parents = parents;
+  size_t offset = 0;
+  for (size_t l = 0; l < data.levels.size(); ++l) {
+    const size_t count = data.levels[l].matrices.size();
+    ref.levels[l] = {joint_lists[2 * l], joint_lists[2 * l + 1], data.levels[l].figures,
+                     std::span<const float>(all_matrices).subspan(offset, count)};
+    offset += count;
+  }
+  const std::string from_views = EncodeLevelSet(ref).value();
+  ASSERT_EQ(from_views.size(), encoded.size());
+  EXPECT_EQ(std::memcmp(from_views.data(), encoded.data(), encoded.size()), 0);
+  // A view of a matrix that is not finite is rejected as the data would be.
+  all_matrices[offset - 1] = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_EQ(EncodeLevelSet(ref).status().code(), StatusCode::kInvalidArgument);
+}
+
 TEST(LevelFormat, EncodeIntoCallerBufferWritesTheSameBytes) {
   const LevelSetData data = MakeSample();
   const std::string encoded = EncodeLevelSet(data).value();
@@ -419,6 +451,7 @@ TEST(ValidateLevelSet, RejectsEachInvalidField) {
     // Encoding checks the matrices' values beside the writing, and reports the same.
     EXPECT_EQ(EncodeLevelSet(data).status().code(), StatusCode::kInvalidArgument) << c.name;
     EXPECT_EQ(EncodeLevelSet(data).status().message(), status.message()) << c.name;
+    EXPECT_EQ(EncodeLevelSet(RefOf(data)).status().message(), status.message()) << c.name;
   }
 }
 
@@ -521,8 +554,9 @@ TEST(DecodeLevelSet, RejectsBadMagic) {
 TEST(DecodeLevelSet, RejectsUnknownMajorVersion) {
   internal::WriterOptions options;
   options.major_version = 2;
+  const LevelSetData sample = MakeSample();
   const AlignedBytes bytes =
-      AlignedBytes::CopyOf(internal::EncodeLevelSetWithOptions(MakeSample(), options).value());
+      AlignedBytes::CopyOf(internal::EncodeLevelSetWithOptions(RefOf(sample), options).value());
   const Status status = DecodeLevelSet(bytes.bytes()).status();
   EXPECT_EQ(status.code(), StatusCode::kUnsupported);
   EXPECT_THAT(status.message(), HasSubstr("version 2.0"));
@@ -730,8 +764,9 @@ TEST(DecodeLevelSet, RejectsKeptCountBeyondJointCount) {
 TEST(DecodeLevelSet, RejectsHeaderAndRecordSizesThatWouldOverflow) {
   internal::WriterOptions later;
   later.minor_version = kLevelFormatMinorVersion + 1;
+  const LevelSetData sample = MakeSample();
   const AlignedBytes bytes =
-      AlignedBytes::CopyOf(internal::EncodeLevelSetWithOptions(MakeSample(), later).value());
+      AlignedBytes::CopyOf(internal::EncodeLevelSetWithOptions(RefOf(sample), later).value());
   ASSERT_TRUE(DecodeLevelSet(bytes.bytes()).ok());
   const Status header = DecodeEdited(
       bytes, [](AlignedBytes& b) { Poke<uint32_t>(b, internal::kOffsetHeaderSize, 0xFFFFFFF0u); });
@@ -771,8 +806,9 @@ TEST(DecodeLevelSet, RejectsReservedFieldsAndUnknownFlagsOfTheCurrentMinorVersio
 TEST(DecodeLevelSet, RejectsUnknownSectionsOfTheCurrentMinorVersion) {
   internal::WriterOptions options;
   options.extra_sections.push_back({99, internal::kNoLevel, "future"});
+  const LevelSetData sample = MakeSample();
   const AlignedBytes bytes =
-      AlignedBytes::CopyOf(internal::EncodeLevelSetWithOptions(MakeSample(), options).value());
+      AlignedBytes::CopyOf(internal::EncodeLevelSetWithOptions(RefOf(sample), options).value());
   const Status status = DecodeLevelSet(bytes.bytes()).status();
   EXPECT_EQ(status.code(), StatusCode::kDataLoss);
   EXPECT_THAT(status.message(), HasSubstr("section count"));
@@ -792,7 +828,7 @@ TEST(DecodeLevelSet, AcceptsLaterMinorVersionAndSkipsWhatItDoesNotKnow) {
   later.extra_sections.push_back({41, 1, std::string(37, '\x5A')});
   const LevelSetData data = MakeSample();
   const AlignedBytes bytes =
-      AlignedBytes::CopyOf(internal::EncodeLevelSetWithOptions(data, later).value());
+      AlignedBytes::CopyOf(internal::EncodeLevelSetWithOptions(RefOf(data), later).value());
 
   StatusOr<LevelSetView> view = DecodeLevelSet(bytes.bytes());
   ASSERT_TRUE(view.ok()) << view.status().ToString();
