@@ -50,4 +50,30 @@ inline void Transpose4(const Lanes4 x[4], Lanes4 rows[4]) {
   rows[2] = __builtin_shufflevector(even01, even23, 2, 3, 6, 7);
   rows[3] = __builtin_shufflevector(odd01, odd23, 2, 3, 6, 7);
 }
+
+// to[c + r * to_stride] = from[r + c * from_stride] for r < rows, c < cols (column-major
+// blocks, strides in doubles): four by four in registers (Transpose4), the edges element
+// by element. Element by element throughout (Eigen's transposed copy), every element was
+// a load and a store of its own. Inline, so that a caller's AVX2 version (base/simd.h)
+// runs it 256 bits wide.
+inline void TransposeDoubles(const double* from, long from_stride, long rows, long cols, double* to,
+                             long to_stride) {
+  long r = 0;
+  for (; r + 4 <= rows; r += 4) {
+    long c = 0;
+    for (; c + 4 <= cols; c += 4) {
+      Lanes4 columns[4], transposed[4];
+      for (int f = 0; f < 4; ++f) columns[f] = *AsLanes4(from + r + (c + f) * from_stride);
+      Transpose4(columns, transposed);
+      for (int a = 0; a < 4; ++a) *AsLanes4(to + c + (r + a) * to_stride) = transposed[a];
+    }
+    for (; c < cols; ++c) {
+      for (int a = 0; a < 4; ++a) to[c + (r + a) * to_stride] = from[r + a + c * from_stride];
+    }
+  }
+  for (; r < rows; ++r) {
+    for (long c = 0; c < cols; ++c) to[c + r * to_stride] = from[r + c * from_stride];
+  }
+}
+
 }  // namespace motionlod

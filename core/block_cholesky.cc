@@ -1,10 +1,10 @@
 #include "core/block_cholesky.h"
 
+#include <Eigen/Cholesky>
 #include <algorithm>
 #include <utility>
 
-#include <Eigen/Cholesky>
-
+#include "base/lanes.h"
 #include "base/simd.h"
 
 namespace motionlod::core {
@@ -106,7 +106,7 @@ StatusOr<BlockCholesky<B>> BlockCholesky<B>::Factor(const BlockSymmetric<B>& a) 
 }
 
 template <int B>
-Eigen::MatrixXd BlockCholesky<B>::SolveTransposed(const Eigen::MatrixXd& bt) const {
+Eigen::MatrixXd BlockCholesky<B>::SolveTransposed(Eigen::MatrixXd bt) const {
   return RunWithWidestSimd([&]() -> Eigen::MatrixXd {
     const int count = static_cast<int>(columns_.size());
     const Eigen::Index dim = static_cast<Eigen::Index>(B) * count;
@@ -117,12 +117,12 @@ Eigen::MatrixXd BlockCholesky<B>::SolveTransposed(const Eigen::MatrixXd& bt) con
         cols,
         std::max<Eigen::Index>(8, kChunkBytes / (8 * std::max<Eigen::Index>(dim, 1)) / 8 * 8));
     Eigen::MatrixXd x(dim, cols);
-    Eigen::MatrixXd y(chunk, dim);
-    const Eigen::Index stride = chunk;
-    auto panel = [&](int s) { return y.data() + static_cast<Eigen::Index>(B) * s * stride; };
+    const Eigen::Index stride = cols;
     for (Eigen::Index first = 0; first < cols; first += chunk) {
       const Eigen::Index rows = std::min(chunk, cols - first);
-      y.topRows(rows) = bt.middleRows(first, rows);
+      auto panel = [&](int s) {
+        return bt.data() + static_cast<Eigen::Index>(B) * s * stride + first;
+      };
       for (int s = count - 1; s >= 0; --s) {  // L z = y
         MultiplyPanel<B>(panel(s), columns_[s].diagonal_inverse, rows, stride);
         for (const auto& [r, l] : columns_[s].below)
@@ -134,7 +134,7 @@ Eigen::MatrixXd BlockCholesky<B>::SolveTransposed(const Eigen::MatrixXd& bt) con
         }
         MultiplyPanel<B>(panel(s), columns_[s].diagonal_inverse.transpose(), rows, stride);
       }
-      x.middleCols(first, rows) = y.topRows(rows).transpose();
+      TransposeDoubles(bt.data() + first, stride, rows, dim, x.data() + first * dim, dim);
     }
     return x;
   });

@@ -102,8 +102,10 @@ class BlockCholesky {
 
   // X = A^-1 Y for the right-hand sides given transposed, bt = Y^T (cols x B blocks);
   // returns X (B blocks x cols). The right-hand sides go through in row chunks whose
-  // panels stay in the L2 cache for the whole forward and backward pass.
-  Eigen::MatrixXd SolveTransposed(const Eigen::MatrixXd& bt) const;
+  // panels stay in the L2 cache for the whole forward and backward pass, solved where
+  // they are (bt is taken by value: move it in where the caller is done with it; a copy
+  // was a pass over all of it, and a write to lines the other thread may have held).
+  Eigen::MatrixXd SolveTransposed(Eigen::MatrixXd bt) const;
 
  private:
   struct Column {

@@ -1370,7 +1370,9 @@ namespace {
 // all frames per kept joint), the layout BlockCholesky::SolveTransposed works in.
 struct LevelSystem {
   BlockSymmetric<4> g;
-  MatrixXd bt, x;
+  MatrixXd bt, x;  // bt: moved into the solve (empty after it) unless nothing is removed
+  // The rigid re-solve's right-hand sides (3T x m): B^T's translation columns, 4s + 3.
+  MatrixXd translation_bt;
 };
 
 Status ValidateLevel(const ReducedSkeleton& level, int n) {
@@ -1458,6 +1460,10 @@ StatusOr<LevelSystem> SolveSystem(const PreparedMotion::Impl& d, const ReducedSk
                        d.joint_fit[j] + lambda * Eigen::Matrix4d::Identity(), cols, cols);
   }
 
+  if (IsRigid(d.settings.variant) && d.settings.resolve_rigid_translation) {
+    system.translation_bt.resize(cols, m);
+    for (int s = 0; s < m; ++s) system.translation_bt.col(s) = bt.col(4 * s + 3);
+  }
   if (m == n) {
     // Nothing removed: the original matrices leave no residual and are what the
     // regulariser pulls towards, so they are the exact minimiser (SolveVariant skips the
@@ -1470,7 +1476,7 @@ StatusOr<LevelSystem> SolveSystem(const PreparedMotion::Impl& d, const ReducedSk
   // quadratic.
   auto factor = BlockCholesky<4>::Factor(g);
   if (!factor.ok()) return factor.status();
-  system.x = factor->SolveTransposed(bt);
+  system.x = factor->SolveTransposed(std::move(bt));
   return system;
 }
 
@@ -1520,7 +1526,6 @@ StatusOr<VariantSolution> SolveVariant(const PreparedMotion::Impl& d, const Redu
     if (!system.ok()) return system.status();
     const int cols = 3 * d.frames;
     const BlockSymmetric<4>& g = system->g;
-    const MatrixXd& bt = system->bt;
     MatrixXd& x = system->x;
 
     if (IsRigid(d.settings.variant)) {
@@ -1574,11 +1579,12 @@ StatusOr<VariantSolution> SolveVariant(const PreparedMotion::Impl& d, const Redu
           couplings[filled[block.row]++] = {block.col, {v(3, 0), v(3, 1), v(3, 2)}};
           couplings[filled[block.col]++] = {block.row, {v(0, 3), v(1, 3), v(2, 3)}};
         }
-        MatrixXd x_tt(cols, m);
+        // In place: each right-hand side is read before its own value is written.
+        MatrixXd x_tt = std::move(system->translation_bt);
         for (int s = 0; s < m; ++s) {
           const Coupling* begin = couplings.data() + coupling_offsets[s];
           const Coupling* end = couplings.data() + coupling_offsets[s + 1];
-          const double* b = bt.col(4 * s + 3).data();
+          const double* b = x_tt.col(s).data();
           double* target = x_tt.col(s).data();
           int col = 0;
           for (; col + 8 <= cols; col += 8) {
@@ -1605,7 +1611,7 @@ StatusOr<VariantSolution> SolveVariant(const PreparedMotion::Impl& d, const Redu
         }
         auto factor = BlockCholesky<1>::Factor(g_tt);
         if (!factor.ok()) return factor.status();
-        const MatrixXd translations = factor->SolveTransposed(x_tt);
+        const MatrixXd translations = factor->SolveTransposed(std::move(x_tt));
         for (int col = 0; col < cols; ++col) {
           for (int s = 0; s < m; ++s) x(4 * s + 3, col) = translations(s, col);
         }
