@@ -53,15 +53,15 @@ inline void AddTraceForms(const double* a, const double* b, Eigen::Index stride,
 // The sum of AddTraceForms' four lanes.
 inline double LaneSum(const Lanes4& lanes) { return (lanes[0] + lanes[1]) + (lanes[2] + lanes[3]); }
 
-// The transpose of `from`'s rows taken in blocks of four, the first kKept rows of each (4:
-// all of them; 3: a 4x3 block without its translation row): row 4b + a of `from` becomes
-// column kKept b + a of `to`, which has from.cols() rows. Four columns at a time, each
-// block's four rows of them (four contiguous doubles) are transposed as whole vectors
-// (Transpose4): element by element, every element was a load and a store of its own, and
-// reading a row of `from` touches one cache line per column. Inline, so that a caller's
-// AVX2 version (base/simd.h) runs it 256 bits wide.
-template <int kKept>
-inline void TransposeRowBlocks(const MatrixXd& from, MatrixXd& to) {
+// The rotations' rows of a solution transposed: `from` is 4m x cols in 4x3 blocks (three
+// rotation rows, then the translation's), and row 4b + a (a < 3) becomes column 3b + a of
+// `to`, which has from.cols() rows. Four columns at a time, each block's four rows of them
+// (four contiguous doubles) are transposed as whole vectors (Transpose4) and the
+// translations' lane dropped: element by element, every element was a load and a store of
+// its own, and reading a row of `from` touches one cache line per column. (Whole matrices
+// go through TransposeDoubles.) Inline, so that a caller's AVX2 version (base/simd.h)
+// runs it 256 bits wide.
+inline void TransposeRotationRows(const MatrixXd& from, MatrixXd& to) {
   const Eigen::Index blocks = from.rows() / 4, cols = from.cols();
   const Eigen::Index from_stride = from.rows(), to_stride = to.rows();
   Eigen::Index col = 0;
@@ -72,14 +72,12 @@ inline void TransposeRowBlocks(const MatrixXd& from, MatrixXd& to) {
         columns[f] = *AsLanes4(from.data() + (col + f) * from_stride + 4 * b);
       }
       Transpose4(columns, rows);
-      for (int a = 0; a < kKept; ++a) {
-        *AsLanes4(to.data() + (kKept * b + a) * to_stride + col) = rows[a];
-      }
+      for (int a = 0; a < 3; ++a) *AsLanes4(to.data() + (3 * b + a) * to_stride + col) = rows[a];
     }
   }
   for (; col < cols; ++col) {
     for (Eigen::Index b = 0; b < blocks; ++b) {
-      for (int a = 0; a < kKept; ++a) to(col, kKept * b + a) = from(4 * b + a, col);
+      for (int a = 0; a < 3; ++a) to(col, 3 * b + a) = from(4 * b + a, col);
     }
   }
 }
@@ -526,7 +524,10 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
     d.pair_fit.push_back(q);
   }
   d.ktt.resize(3 * frames, 4 * n);
-  RunWithWidestSimd([&] { TransposeRowBlocks<4>(d.kt, d.ktt); });
+  RunWithWidestSimd([&] {
+    TransposeDoubles(d.kt.data(), d.kt.rows(), d.kt.rows(), d.kt.cols(), d.ktt.data(),
+                     d.ktt.rows());
+  });
   // F^T = Kt^T Q, one pair at a time: F_k += Q_kl Kt_l and F_l += Q_kl^T Kt_k, each a
   // product of 4 contiguous columns (a sparse-dense product would update one coefficient
   // at a time); in pieces of frames (rows), each in the widest vectors this CPU has, and
@@ -1545,9 +1546,9 @@ StatusOr<VariantSolution> SolveVariant(const PreparedMotion::Impl& d, const Redu
         // The right-hand sides transposed, as SolveTransposed takes them: b_T^T - x_N^T G_TN^T.
         // G_TT and G_TN keep G's block sparsity: G_TT is a block matrix of 1x1 blocks, and
         // each coefficient of G_TN subtracts one contiguous column of all frames.
-        // x_N^T: the rotations' rows of x, transposed (TransposeRowBlocks).
+        // x_N^T: the rotations' rows of x, transposed.
         MatrixXd x_nt(cols, 3 * m);
-        TransposeRowBlocks<3>(x, x_nt);
+        TransposeRotationRows(x, x_nt);
         const Eigen::Index nt_stride = x_nt.rows();
         const double* nt_data = x_nt.data();
         BlockSymmetric<1> g_tt(m);
@@ -1584,11 +1585,10 @@ StatusOr<VariantSolution> SolveVariant(const PreparedMotion::Impl& d, const Redu
         for (int s = 0; s < m; ++s) {
           const Coupling* begin = couplings.data() + coupling_offsets[s];
           const Coupling* end = couplings.data() + coupling_offsets[s + 1];
-          const double* b = x_tt.col(s).data();
-          double* target = x_tt.col(s).data();
+          double* rhs = x_tt.col(s).data();
           int col = 0;
           for (; col + 8 <= cols; col += 8) {
-            Lanes4 sum0 = *AsLanes4(b + col), sum1 = *AsLanes4(b + col + 4);
+            Lanes4 sum0 = *AsLanes4(rhs + col), sum1 = *AsLanes4(rhs + col + 4);
             for (const Coupling* c = begin; c != end; ++c) {
               const double* x0 = nt_data + 3 * c->u * nt_stride + col;
               const double* x1 = x0 + nt_stride;
@@ -1597,16 +1597,16 @@ StatusOr<VariantSolution> SolveVariant(const PreparedMotion::Impl& d, const Redu
               sum1 -= c->g[0] * *AsLanes4(x0 + 4) + c->g[1] * *AsLanes4(x1 + 4) +
                       c->g[2] * *AsLanes4(x2 + 4);
             }
-            *AsLanes4(target + col) = sum0;
-            *AsLanes4(target + col + 4) = sum1;
+            *AsLanes4(rhs + col) = sum0;
+            *AsLanes4(rhs + col + 4) = sum1;
           }
           for (; col < cols; ++col) {
-            double sum = b[col];
+            double sum = rhs[col];
             for (const Coupling* c = begin; c != end; ++c) {
               const double* x0 = nt_data + 3 * c->u * nt_stride + col;
               sum -= c->g[0] * x0[0] + c->g[1] * x0[nt_stride] + c->g[2] * x0[2 * nt_stride];
             }
-            target[col] = sum;
+            rhs[col] = sum;
           }
         }
         auto factor = BlockCholesky<1>::Factor(g_tt);
