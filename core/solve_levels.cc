@@ -1401,12 +1401,45 @@ Status ValidateLevel(const ReducedSkeleton& level, int n) {
 // tolerance the rigid variants' stored matrices are held to). Composed through a
 // skeleton's hierarchy, the float matrices of glTF, FBX and Collada files are orthonormal
 // to 3e-6 to 8e-6 (2e-16 for BVH, whose rotations are built in double).
-bool AllRotations(const MatrixXd& x) {
+// Four joints of a frame at a time, one per lane: each column of their blocks (four
+// contiguous doubles, the translation's last) is transposed into lanes (Transpose4), and
+// the column products of R^T R and the determinant (the columns' triple product) are whole
+// vectors; the last group repeats its last joint. (A matrix at a time through Eigen, this
+// check was half of a rigid bake's full level.) Inline, so that a caller's AVX2 version
+// (base/simd.h) runs it 256 bits wide.
+inline bool AllRotations(const MatrixXd& x) {
+  const Eigen::Index joints = x.rows() / 4, stride = x.rows();
   for (Eigen::Index t = 0; t < x.cols(); t += 3) {
-    for (Eigen::Index s = 0; s < x.rows(); s += 4) {
-      const Eigen::Matrix3d r = x.block<3, 3>(s, t);
-      const double error_squared = (r.transpose() * r - Eigen::Matrix3d::Identity()).squaredNorm();
-      if (error_squared > 1e-10 || !(r.determinant() > 0)) return false;
+    const double* frame = x.data() + t * stride;
+    for (Eigen::Index first = 0; first < joints; first += 4) {
+      Lanes4 column[3][4];  // column[c][i]: R(i, c) of the four joints
+      for (int c = 0; c < 3; ++c) {
+        Lanes4 blocks[4];
+        for (Eigen::Index j = 0; j < 4; ++j) {
+          blocks[j] = *AsLanes4(frame + c * stride + 4 * std::min(first + j, joints - 1));
+        }
+        Transpose4(blocks, column[c]);
+      }
+      Lanes4 gram[3][3];  // R^T R - I, its upper triangle
+      for (int a = 0; a < 3; ++a) {
+        for (int b = a; b < 3; ++b) {
+          gram[a][b] = column[a][0] * column[b][0] + column[a][1] * column[b][1] +
+                       column[a][2] * column[b][2] - (a == b ? 1.0 : 0.0);
+        }
+      }
+      const Lanes4 error_squared =
+          gram[0][0] * gram[0][0] + gram[1][1] * gram[1][1] + gram[2][2] * gram[2][2] +
+          2 * (gram[0][1] * gram[0][1] + gram[0][2] * gram[0][2] + gram[1][2] * gram[1][2]);
+      const Lanes4* c0 = column[0];
+      const Lanes4* c1 = column[1];
+      const Lanes4* c2 = column[2];
+      const Lanes4 determinant = c0[0] * (c1[1] * c2[2] - c1[2] * c2[1]) -
+                                 c0[1] * (c1[0] * c2[2] - c1[2] * c2[0]) +
+                                 c0[2] * (c1[0] * c2[1] - c1[1] * c2[0]);
+      const auto rotation = (error_squared <= 1e-10) & (determinant > 0);
+      for (int j = 0; j < 4; ++j) {
+        if (rotation[j] == 0) return false;
+      }
     }
   }
   return true;

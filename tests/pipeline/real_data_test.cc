@@ -116,6 +116,55 @@ TEST_F(RealData, NoJointRemovedReproducesTheOriginal) {
   }
 }
 
+TEST_F(RealData, RigidFullLevelKeepsRotationsAndChecksEveryJointOfEveryFrame) {
+  // CesiumMan's 19 joints leave the last of the check's groups of four joints padded.
+  const RealScene base = Load("characters/CesiumMan.glb", 0, 12);
+  const int n = base.inputs.character->joint_count();
+  ASSERT_NE(n % 4, 0);
+  const auto full_level = [&](const RealScene& s) {
+    const auto prepared = Prepare(s, core::Variant::kVPPD);
+    auto result = prepared->SolveLevel(Level(s, n));
+    EXPECT_TRUE(result.ok()) << result.status().ToString();
+    return std::make_pair(prepared, *std::move(result));
+  };
+  const auto original_of = [&](const core::PreparedMotion& prepared, int t, int joint) {
+    const core::Affine34f k =
+        prepared.original_matrices().block<4, 3>(4 * joint, 3 * t).transpose().cast<float>();
+    return k;
+  };
+  // The glTF's matrices are rotations to float precision: the level is the original.
+  {
+    const auto [prepared, result] = full_level(base);
+    EXPECT_EQ(result.optimized.mean_e, 0.0);
+    for (int t = 0; t < base.inputs.motion.frame_count; ++t) {
+      for (int j = 0; j < n; ++j) {
+        EXPECT_EQ(result.matrices[static_cast<size_t>(t) * n + j], original_of(*prepared, t, j))
+            << t << " " << j;
+      }
+    }
+  }
+  // Any one joint that is no rotation in one frame (scaled by 1.0001, or mirrored), whatever
+  // its lane in its group: the level goes through the solve and the projection, which
+  // leaves a rotation where it was.
+  for (int bad = 0; bad < n; ++bad) {
+    for (bool mirror : {false, true}) {
+      RealScene s = base;
+      const int t = mirror ? 0 : s.inputs.motion.frame_count - 1;
+      core::Affine34d& world = s.inputs.motion.joint_world[static_cast<size_t>(t) * n + bad];
+      if (mirror) {
+        world.col(0) *= -1;
+      } else {
+        world.leftCols<3>() *= 1.0001;
+      }
+      const auto [prepared, result] = full_level(s);
+      const core::RowMajorAffine34f& solved = result.matrices[static_cast<size_t>(t) * n + bad];
+      EXPECT_NE(solved, original_of(*prepared, t, bad)) << bad << " " << mirror;
+      EXPECT_GT(solved.leftCols<3>().cast<double>().determinant(), 0) << bad << " " << mirror;
+      EXPECT_GT(result.optimized.mean_e, 0.0) << bad << " " << mirror;
+    }
+  }
+}
+
 TEST_F(RealData, LeastSquaresVariantsAreAtOrBelowTheBaselineAtEveryLevel) {
   for (const char* file : {"characters/Fox.glb", "characters/CesiumMan.glb", "motions/pirouette.bvh"}) {
     const RealScene s = Load(file, 30, 90);
