@@ -218,7 +218,9 @@ struct PreparedMotion::Impl {
     std::vector<Vec3d> column_norms;  // T x n: column norms of Delta_k(t)'s 3x3 part
     std::vector<double> group_bound;  // T x n: bound of group j's vertices in frame t
     std::vector<double> frame_bound;  // T
-    std::vector<double> joint_bound;  // scratch, n
+    // Scratch: the joints' box bounds U_k in the frames of the batch of kGroupBoundFrames
+    // that FrameBounds is filling, joint k's at kGroupBoundFrames k.
+    std::vector<double> joint_bound;
     // The boxes of `joints`, four joints at a time (FrameBounds' lanes): lanes of their
     // centers' x, y, z, then of their half extents' x, y, z (24 doubles per group).
     std::vector<double> joint_boxes;
@@ -295,6 +297,9 @@ struct PreparedMotion::Impl {
                             Eigen::Matrix<double, Eigen::Dynamic, 3>& kept_frame,
                             const std::vector<int>& kept, const std::vector<int>& moving_kept,
                             int t, LevelErrors& out) const;
+  // Frames must come in order, 0 to T - 1: the group bounds are written a batch of
+  // kGroupBoundFrames frames at a time, when the batch's last frame (or frame T - 1) comes.
+  static constexpr int kGroupBoundFrames = 4;
   void FrameBounds(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame, int t,
                    MaxSearchBounds& bounds) const;
   // The search starts from `start` (a value some vertex attains) and evaluates only the
@@ -1048,7 +1053,7 @@ PreparedMotion::Impl::MaxSearchBounds PreparedMotion::Impl::MakeMaxSearchBounds(
   bounds.column_norms.resize(static_cast<size_t>(frames) * n);
   bounds.group_bound.assign(static_cast<size_t>(frames) * n, 0.0);
   bounds.frame_bound.assign(frames, 0.0);
-  bounds.joint_bound.resize(n);
+  bounds.joint_bound.assign(static_cast<size_t>(n) * kGroupBoundFrames, 0.0);
   const size_t count = bounds.joints.size();
   bounds.joint_boxes.assign(24 * ((count + 3) / 4), 0.0);
   for (size_t e = 0; e < count; ++e) {
@@ -1107,20 +1112,31 @@ void PreparedMotion::Impl::FrameBounds(const Eigen::Matrix<double, Eigen::Dynami
         for (int j = 0; j < 4; ++j) root[a][j] = std::sqrt(squared[a][j]);
       }
       const Lanes4 joint_bound = root[3] + root[0] * box[3] + root[1] * box[4] + root[2] * box[5];
+      const int lane = t % kGroupBoundFrames;
       for (size_t j = 0; j < 4 && first + j < count; ++j) {
         norms[k[j]] = Vec3d(root[0][j], root[1][j], root[2][j]);
-        bounds.joint_bound[k[j]] = joint_bound[j];
+        bounds.joint_bound[static_cast<size_t>(k[j]) * kGroupBoundFrames + lane] = joint_bound[j];
       }
     }
+    // The groups' bounds of a batch of frames at once, one frame per lane: a frame at a
+    // time, the weighted bound of each group was scalar, most of FrameBounds' time.
+    if (t % kGroupBoundFrames != kGroupBoundFrames - 1 && t != frames - 1) return;
+    const int batch_first = t - t % kGroupBoundFrames, batch_frames = t - batch_first + 1;
     for (int j : bounds.groups) {
-      double u;
-      WeightedBound<1, false>(
+      double u[kGroupBoundFrames];
+      WeightedBound<kGroupBoundFrames, false>(
           group_influences.data() + group_influence_offsets[j],
           group_influences.data() + group_influence_offsets[j + 1],
           std::numeric_limits<double>::infinity(),
-          [&](int g, double* joint_bound) { *joint_bound = bounds.joint_bound[g]; }, &u);
-      bounds.group_bound[static_cast<size_t>(t) * n + j] = u;
-      bounds.frame_bound[t] = std::max(bounds.frame_bound[t], u);
+          [&](int g, double* joint_bound) {
+            std::copy_n(bounds.joint_bound.data() + static_cast<size_t>(g) * kGroupBoundFrames,
+                        kGroupBoundFrames, joint_bound);
+          },
+          u);
+      for (int f = 0; f < batch_frames; ++f) {
+        bounds.group_bound[static_cast<size_t>(batch_first + f) * n + j] = u[f];
+        bounds.frame_bound[batch_first + f] = std::max(bounds.frame_bound[batch_first + f], u[f]);
+      }
     }
   });
 }
