@@ -300,8 +300,7 @@ struct PreparedMotion::Impl {
   // Frames must come in order, 0 to T - 1: the group bounds are written a batch of
   // kGroupBoundFrames frames at a time, when the batch's last frame (or frame T - 1) comes.
   static constexpr int kGroupBoundFrames = 4;
-  void FrameBounds(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame, int t,
-                   MaxSearchBounds& bounds) const;
+  void FrameBounds(const DeltaView& delta, int t, MaxSearchBounds& bounds) const;
   // The search starts from `start` (a value some vertex attains) and evaluates only the
   // clusters that cluster_mask flags (nullptr: every cluster).
   // Returns where it ended, the start of a later search.
@@ -730,12 +729,7 @@ void PreparedMotion::Impl::EvaluateErrors(const DeltaView& delta, const std::vec
   const auto maximum_figures = [&] {
     RunWithWidestSimd([&] {
       MaxSearchBounds bounds = MakeMaxSearchBounds(nullptr, moving);
-      Eigen::Matrix<double, Eigen::Dynamic, 3> frame(4 * n, 3);
-      frame.setZero();
-      for (int t = 0; t < frames; ++t) {
-        delta.Frame(t, moving_joints, frame);
-        FrameBounds(frame, t, bounds);
-      }
+      for (int t = 0; t < frames; ++t) FrameBounds(delta, t, bounds);
       MaxVertexError(delta, bounds, decide_within, MaxSearchStart{}, nullptr, out);
     });
   };
@@ -1067,8 +1061,7 @@ PreparedMotion::Impl::MaxSearchBounds PreparedMotion::Impl::MakeMaxSearchBounds(
   return bounds;
 }
 
-void PreparedMotion::Impl::FrameBounds(const Eigen::Matrix<double, Eigen::Dynamic, 3>& frame, int t,
-                                       MaxSearchBounds& bounds) const {
+void PreparedMotion::Impl::FrameBounds(const DeltaView& delta, int t, MaxSearchBounds& bounds) const {
   RunWithWidestSimd([&] {
     // Coarse bounds for every group from the joints' own boxes (one box bound per joint); a
     // visited group is refined with its own box.
@@ -1076,8 +1069,11 @@ void PreparedMotion::Impl::FrameBounds(const Eigen::Matrix<double, Eigen::Dynami
     const auto& group_influence_offsets = c.group_influence_offsets();
     const auto& group_influences = c.group_influences();
     Vec3d* norms = bounds.column_norms.data() + static_cast<size_t>(t) * n;
-    const double* delta = frame.data();
-    const Eigen::Index stride = frame.rows();
+    // Delta_k's rows read as DeltaView::Frame forms them, without a copy of the frame.
+    const double* solution = delta.solution->data() + 3 * t * delta.solution->rows();
+    const double* original = delta.original->data() + 3 * t * delta.original->rows();
+    const Eigen::Index s_stride = delta.solution->rows(), o_stride = delta.original->rows();
+    const int* s_row = delta.solution_row.data();
     const size_t count = bounds.joints.size();
     // LaneDelta::BoxBounds' U_k for each joint's box, with the column norms it needs, four
     // joints at a time, one per lane: each row of Delta_k (four contiguous doubles) of the
@@ -1093,7 +1089,10 @@ void PreparedMotion::Impl::FrameBounds(const Eigen::Matrix<double, Eigen::Dynami
       Lanes4 entry[3][4];  // entry[i][a]: Delta_k(i, a) of the four joints
       for (int i = 0; i < 3; ++i) {
         Lanes4 row[4];
-        for (int j = 0; j < 4; ++j) row[j] = *AsLanes4(delta + i * stride + 4 * k[j]);
+        for (int j = 0; j < 4; ++j) {
+          row[j] = *AsLanes4(solution + i * s_stride + s_row[k[j]]) -
+                   *AsLanes4(original + i * o_stride + 4 * k[j]);
+        }
         Transpose4(row, entry[i]);
       }
       Lanes4 squared[4];
@@ -1845,11 +1844,10 @@ StatusOr<LevelErrors> BaselineSequence::Next(const ReducedSkeleton& level) {
     PreparedMotion::Impl::SampleScratch scratch(n, changed_samples.size());
     size_t next_sample = 0;
     const size_t pair_count = d.pairs.size();
-    // Only the joints whose Delta is read: the changed pairs', the bounded groups' and the
-    // changed sampled vertices'.
+    // Only the joints whose Delta the frame's copy serves: the changed pairs' and the
+    // changed sampled vertices' (the bounds read theirs from the matrices).
     std::vector<uint8_t> read(n, 0);
     for (size_t q : changed_pairs) read[d.pairs[q].first] = read[d.pairs[q].second] = 1;
-    for (int k : bounds.joints) read[k] = 1;
     for (uint32_t v : changed_samples) {
       for (uint32_t g = v == 0 ? 0 : d.sample_vertices[v - 1].influence_end;
            g < d.sample_vertices[v].influence_end; ++g) {
@@ -1890,7 +1888,7 @@ StatusOr<LevelErrors> BaselineSequence::Next(const ReducedSkeleton& level) {
       out.en_vertex[t] = std::max(0.0, LaneSum(en));
       out.e[t] = d.alpha * (out.ep_vertex[t] + out.ep_joint[t]) +
                  d.beta * (out.en_vertex[t] + out.en_joint[t]);
-      d.FrameBounds(frame, t, bounds);
+      d.FrameBounds(delta, t, bounds);
       if (next_sample < d.sample_frames.size() && d.sample_frames[next_sample] == t) {
         if (!changed_samples.empty()) {
           d.SampleFrameValues(frame, next_sample, &changed_samples, scratch,
