@@ -216,7 +216,7 @@ struct PreparedMotion::Impl {
     std::vector<int> groups;          // the groups bounded (nonempty ones)
     std::vector<int> joints;          // the joints that weight them (their Delta is read)
     std::vector<Vec3d> column_norms;  // T x n: column norms of Delta_k(t)'s 3x3 part
-    std::vector<double> group_bound;  // T x n: bound of group j's vertices in frame t
+    std::vector<double> group_bound;  // n x T: bound of group j's vertices in frame t at jT + t
     std::vector<double> frame_bound;  // T
     // Scratch: the joints' box bounds U_k in the frames of the batch of kGroupBoundFrames
     // that FrameBounds is filling, joint k's at kGroupBoundFrames k.
@@ -1121,6 +1121,8 @@ void PreparedMotion::Impl::FrameBounds(const DeltaView& delta, int t, MaxSearchB
     // time, the weighted bound of each group was scalar, most of FrameBounds' time.
     if (t % kGroupBoundFrames != kGroupBoundFrames - 1 && t != frames - 1) return;
     const int batch_first = t - t % kGroupBoundFrames, batch_frames = t - batch_first + 1;
+    static_assert(kGroupBoundFrames == 4, "a batch's bounds are one Lanes4");
+    Lanes4 batch_bound = {};  // each frame's largest group bound
     for (int j : bounds.groups) {
       double u[kGroupBoundFrames];
       WeightedBound<kGroupBoundFrames, false>(
@@ -1132,11 +1134,12 @@ void PreparedMotion::Impl::FrameBounds(const DeltaView& delta, int t, MaxSearchB
                         kGroupBoundFrames, joint_bound);
           },
           u);
-      for (int f = 0; f < batch_frames; ++f) {
-        bounds.group_bound[static_cast<size_t>(batch_first + f) * n + j] = u[f];
-        bounds.frame_bound[batch_first + f] = std::max(bounds.frame_bound[batch_first + f], u[f]);
-      }
+      std::copy_n(u, batch_frames,
+                  bounds.group_bound.data() + static_cast<size_t>(j) * frames + batch_first);
+      const Lanes4 group = *AsLanes4(u);
+      batch_bound = batch_bound < group ? group : batch_bound;
     }
+    for (int f = 0; f < batch_frames; ++f) bounds.frame_bound[batch_first + f] = batch_bound[f];
   });
 }
 
@@ -1252,7 +1255,7 @@ PreparedMotion::Impl::MaxSearchStart PreparedMotion::Impl::MaxVertexError(
           }
         }
         const auto group_bound = [&](int f, int j) {
-          return lane_used[f] ? bounds.group_bound[static_cast<size_t>(lane_frame[f]) * n + j]
+          return lane_used[f] ? bounds.group_bound[static_cast<size_t>(j) * frames + lane_frame[f]]
                               : 0.0;
         };
         // Only the groups that can beat the best so far in some lane, by decreasing bound.
