@@ -527,22 +527,21 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
     q.topLeftCorner<3, 3>() += d.beta_fit * moment.normal_moment;
     d.pair_fit.push_back(q);
   }
-  d.ktt.resize(3 * frames, 4 * n);
-  RunWithWidestSimd([&] {
-    TransposeDoubles(d.kt.data(), d.kt.rows(), d.kt.rows(), d.kt.cols(), d.ktt.data(),
-                     d.ktt.rows());
-  });
   // F^T = Kt^T Q, one pair at a time: F_k += Q_kl Kt_l and F_l += Q_kl^T Kt_k, each a
   // product of 4 contiguous columns (a sparse-dense product would update one coefficient
-  // at a time); in pieces of frames (rows), each in the widest vectors this CPU has, and
-  // each piece zeroes its own rows first (zeroing all of F^T up front was a serial pass
-  // over it, and left the lines of every piece with the thread that zeroed them).
+  // at a time); in pieces of frames (rows), each in the widest vectors this CPU has. Each
+  // piece first transposes its frames' columns of Kt into its rows of Kt^T, and zeroes its
+  // rows of F^T: a serial pass over either (the whole transpose, or zeroing F^T up front)
+  // kept the other thread waiting and left every piece's lines with the thread that made it.
+  d.ktt.resize(3 * frames, 4 * n);
   d.ft.resize(3 * frames, 4 * n);
   const Eigen::Index ft_stride = d.ft.rows();
   RunPieces(run, (frames + kFramesPerPiece - 1) / kFramesPerPiece, [&](int piece) {
     RunWithWidestSimd([&] {
       const Eigen::Index first = 3 * piece * kFramesPerPiece;
       const Eigen::Index rows = std::min<Eigen::Index>(3 * kFramesPerPiece, ft_stride - first);
+      TransposeDoubles(d.kt.data() + first * d.kt.rows(), d.kt.rows(), d.kt.rows(), rows,
+                       d.ktt.data() + first, d.ktt.rows());
       d.ft.middleRows(first, rows).setZero();
       for (size_t q = 0; q < d.pairs.size(); ++q) {
         const auto [k, l] = d.pairs[q];
