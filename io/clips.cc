@@ -383,16 +383,21 @@ core::Motion SampleClip(const Clip& clip, const std::vector<SceneNode>& nodes,
   motion.frame_count = FrameCount(clip.info.duration_seconds, fps);
   motion.joint_count = static_cast<int>(joint_nodes.size());
   motion.joint_world.resize(static_cast<size_t>(motion.frame_count) * joint_nodes.size());
-  // Contiguous frame ranges, one sampler each.
-  const int workers = std::max(1, std::min(pool != nullptr ? pool->threads() : 1, motion.frame_count));
+  // Contiguous frame ranges, one sampler each. On several threads, a few ranges per thread:
+  // a thread that comes late (from the character's build, beside this in a bake) still
+  // takes a share.
+  constexpr int kRangesPerThread = 4;
+  const int threads = pool != nullptr ? pool->threads() : 1;
+  const int ranges =
+      std::max(1, std::min(threads > 1 ? kRangesPerThread * threads : 1, motion.frame_count));
   const auto sample_range = [&](int w) {
     PoseSampler sampler(nodes, joint_nodes);
-    const int end = static_cast<int>(static_cast<int64_t>(motion.frame_count) * (w + 1) / workers);
+    const int end = static_cast<int>(static_cast<int64_t>(motion.frame_count) * (w + 1) / ranges);
     // The frames in the widest vectors this CPU has (base/simd.h): the blends, the
     // compositions and their products along the hierarchy are a short bake's largest part
     // outside the solver.
     RunWithWidestSimd([&] {
-      for (int t = static_cast<int>(static_cast<int64_t>(motion.frame_count) * w / workers);
+      for (int t = static_cast<int>(static_cast<int64_t>(motion.frame_count) * w / ranges);
            t < end; ++t) {
         const double seconds = std::min(t / fps, clip.info.duration_seconds);
         sampler.Evaluate(&clip, seconds,
@@ -401,7 +406,7 @@ core::Motion SampleClip(const Clip& clip, const std::vector<SceneNode>& nodes,
     });
   };
   if (pool != nullptr) {
-    pool->Run(workers, sample_range);
+    pool->Run(ranges, sample_range);
   } else {
     sample_range(0);
   }
