@@ -380,9 +380,14 @@ TEST_F(RealData, BaselineSequenceGivesEachLevelsBaselineErrors) {
         // The same maximum: both blend the same vertices in the same float arithmetic.
         EXPECT_EQ(b->max_vertex_error_pct, a->max_vertex_error_pct) << where;
         // The sample's sums add the same values in the same order; only the ratio
-        // estimates' exact mean squares are summed another way.
+        // estimates' exact mean squares are summed another way. The normals of vertices
+        // that no change reaches are at exactly 0 degrees in the sequence, where
+        // BaselineErrors measures a normal against itself to a few 1e-17 rad (1e-14 deg
+        // in the mean at most).
         EXPECT_NEAR(b->mean_vertex_error_pct, a->mean_vertex_error_pct, 1e-9 * a->mean_vertex_error_pct) << where;
-        EXPECT_NEAR(b->mean_normal_error_deg, a->mean_normal_error_deg, 1e-9 * a->mean_normal_error_deg) << where;
+        EXPECT_NEAR(b->mean_normal_error_deg, a->mean_normal_error_deg,
+                    1e-9 * a->mean_normal_error_deg + 1e-12)
+            << where;
         restarts += b->max_vertex_error_pct < last.max_vertex_error_pct;
         last = *b;
       }
