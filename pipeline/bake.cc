@@ -81,6 +81,14 @@ Status SolveLevels(const std::shared_ptr<const core::PreparedMotion>& prepared,
   const size_t tasks = level_tasks + (beside ? 1 : 0);
   std::vector<Status> errors(tasks);
   std::vector<std::atomic<int>> halves_done(count);
+  // The sequence that baselines taken one from another continue: *chain, or this call's
+  // own; made at its first step (one task takes every step of a call).
+  std::unique_ptr<core::BaselineSequence> own_sequence;
+  std::unique_ptr<core::BaselineSequence>& sequence = chain != nullptr ? *chain : own_sequence;
+  const auto next_in_sequence = [&](size_t index) {
+    if (!sequence) sequence = std::make_unique<core::BaselineSequence>(prepared);
+    return sequence->Next(levels[index]);
+  };
   size_t reported = 0;
   pool.Run(
       static_cast<int>(tasks),
@@ -100,19 +108,15 @@ Status SolveLevels(const std::shared_ptr<const core::PreparedMotion>& prepared,
           return true;
         };
         if (consecutive && task == 0) {
-          std::unique_ptr<core::BaselineSequence> own;
-          std::unique_ptr<core::BaselineSequence>& sequence = chain != nullptr ? *chain : own;
-          if (!sequence) sequence = std::make_unique<core::BaselineSequence>(prepared);
           for (size_t index = 0; index < count && !Cancelled(cancel); ++index) {
-            if (!set_baseline(index, sequence->Next(levels[index]))) return;
+            if (!set_baseline(index, next_in_sequence(index))) return;
           }
           return;
         }
         if (!consecutive && task % 2 == 1) {
           const size_t index = task / 2;
           if (chain != nullptr && index + 1 == count) {
-            if (!*chain) *chain = std::make_unique<core::BaselineSequence>(prepared);
-            set_baseline(index, (*chain)->Next(levels[index]));
+            set_baseline(index, next_in_sequence(index));
           } else {
             set_baseline(index, prepared->BaselineErrors(levels[index], pool.Runner()));
           }
