@@ -231,6 +231,13 @@ struct HttpServer::Impl {
   std::unique_ptr<AccessLog> access_log;
   httplib::Server server;
   std::atomic<int> listen_fd{-1};
+  // The library's stop() does nothing until its listen loop has started: a SIGTERM
+  // right after "listening on" was lost, and the daemon served on. Run() and Stop()
+  // agree on who goes first.
+  std::mutex run_mutex;
+  bool stop_requested = false;  // Run() returns at once
+  bool run_started = false;     // Run() has entered the library: Stop() waits for its loop
+  std::atomic<bool> run_ended{false};
 };
 
 void HttpServer::Impl::Configure() {
@@ -535,12 +542,28 @@ StatusOr<int> HttpServer::Bind() {
 }
 
 bool HttpServer::Run() {
+  {
+    std::lock_guard lock(impl_->run_mutex);
+    if (impl_->stop_requested) return true;
+    impl_->run_started = true;
+  }
   const bool served = impl_->server.listen_after_bind();
+  impl_->run_ended = true;
   // The connection threads have ended: their last access lines go out now.
   if (impl_->access_log) impl_->access_log->Flush();
   return served;
 }
 
-void HttpServer::Stop() { impl_->server.stop(); }
+void HttpServer::Stop() {
+  {
+    std::lock_guard lock(impl_->run_mutex);
+    impl_->stop_requested = true;
+    if (!impl_->run_started) return;
+  }
+  while (!impl_->server.is_running() && !impl_->run_ended) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  impl_->server.stop();
+}
 
 }  // namespace motionlod::server

@@ -36,7 +36,9 @@ class HttpServer {
   StatusOr<int> Bind();
   // Serves until Stop(); false when the listener failed.
   bool Run();
-  // Stops accepting, closes idle connections and lets Run() return. Thread-safe.
+  // Stops accepting, closes idle connections and lets Run() return. Thread-safe, and
+  // effective whenever it comes: before Run() (which then returns at once) or while
+  // Run() is starting the library's loop.
   void Stop();
 
  private:

@@ -1,11 +1,12 @@
 // The daemon's parts on their own: level cache, job queue, store, blob store, router,
-// framing guards, metrics, and the one-file rule for httplib.h.
+// framing guards, metrics, the HTTP server's stop, and the one-file rule for httplib.h.
 #include <gtest/gtest.h>
 
 #include <atomic>
 #include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <future>
 #include <regex>
 #include <set>
 #include <sstream>
@@ -14,6 +15,7 @@
 #include "io/sha256.h"
 #include "server/blob_store.h"
 #include "server/http.h"
+#include "server/http_server.h"
 #include "server/job_queue.h"
 #include "server/level_cache.h"
 #include "server/metrics.h"
@@ -308,6 +310,42 @@ TEST(OpenApi, TheServedSpecDescribesExactlyTheRoutesTheDaemonHas) {
   for (const http::Route& route : router.routes()) served.insert({route.method, route.pattern});
   EXPECT_EQ(documented, served);
   EXPECT_GE(served.size(), 20u);
+  fs::remove_all(dir);
+}
+
+// The library's own stop() is lost when it comes before its listen loop has started: a
+// daemon sent SIGTERM right after it printed "listening on" served on. Stop() before
+// Run(), and Stop() while Run() is starting, must both end Run().
+TEST(HttpServer, StopEndsRunWhetherItComesBeforeOrWhileRunStarts) {
+  const fs::path dir = testing::TestDirectory();
+  Config config;
+  config.data_dir = (dir / "data").string();
+  config.import_worker = MOTIONLOD_IMPORT_WORKER;
+  config.port = 0;
+  config.http_threads = 2;
+  auto service = Service::Open(config);
+  ASSERT_TRUE(service.ok()) << service.status().message();
+  std::atomic<int> streams{0}, uploads{0};
+  RouteContext context{service->get(), &config, [](std::string&) {}, &streams, &uploads};
+  const http::Router router = MakeRouter(context);
+  HttpMetrics metrics(RouteLabels(router));
+  for (int round = 0; round < 40; ++round) {
+    HttpServer server(config, router, metrics);
+    ASSERT_TRUE(server.Bind().ok());
+    const bool stop_before_run = round % 2 == 0;
+    if (stop_before_run) server.Stop();
+    std::promise<bool> ran;
+    std::future<bool> result = ran.get_future();
+    std::thread runner([&] { ran.set_value(server.Run()); });
+    if (!stop_before_run) server.Stop();
+    const bool ended = result.wait_for(std::chrono::seconds(10)) == std::future_status::ready;
+    EXPECT_TRUE(ended) << "round " << round << ": Run() still serving after Stop()";
+    // A lost stop leaves the loop running: stopping it again (it now runs) ends the test.
+    while (result.wait_for(std::chrono::milliseconds(100)) != std::future_status::ready) server.Stop();
+    runner.join();
+    EXPECT_TRUE(result.get());
+    if (!ended) break;
+  }
   fs::remove_all(dir);
 }
 
