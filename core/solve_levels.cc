@@ -533,7 +533,7 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
   // piece transposes its frames' columns of Kt and sums its rows of F^T in panels of its
   // own, then copies both into Kt^T and F^T: a column of those (3T rows) rarely ends on a
   // cache line, so two pieces share a line in every column, and summing in place had both
-  // threads write those lines once per pair (Fox on an Intel Xeon, 2 threads: 28 to 34 us
+  // threads write those lines once per pair (Fox on an Intel Xeon, 2 threads: 23 to 34 us
   // for a piece beside another, 8 to 12 alone). A serial pass (the whole transpose, or
   // zeroing F^T up front) kept the other thread waiting.
   d.ktt.resize(3 * frames, 4 * n);

@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <fstream>
 #include <future>
+#include <optional>
 #include <regex>
 #include <set>
 #include <sstream>
@@ -279,16 +280,40 @@ TEST(Layering, OnlyHttpServerCcIncludesHttplibAndTheServerIncludesNoClientOrTool
   EXPECT_EQ(api.find("#include <Eigen"), std::string::npos);
 }
 
-TEST(OpenApi, TheServedSpecDescribesExactlyTheRoutesTheDaemonHas) {
-  const fs::path dir = testing::TestDirectory();
+// A service in a test directory of its own and the daemon's router over it: set `config`,
+// then Open().
+struct RoutedService {
+  RoutedService() : dir(testing::TestDirectory()) {
+    config.data_dir = (dir / "data").string();
+    config.import_worker = MOTIONLOD_IMPORT_WORKER;  // not next to this test binary
+  }
+  ~RoutedService() {
+    router.reset();
+    service.reset();
+    if (!::testing::Test::HasFailure()) fs::remove_all(dir);  // kept to look into
+  }
+  Status Open() {
+    auto opened = Service::Open(config);
+    if (!opened.ok()) return opened.status();
+    service = *std::move(opened);
+    context = RouteContext{service.get(), &config, [](std::string&) {}, &streams, &uploads};
+    router = MakeRouter(context);
+    return Status::Ok();
+  }
+
+  fs::path dir;
   Config config;
-  config.data_dir = (dir / "data").string();
-  config.import_worker = MOTIONLOD_IMPORT_WORKER;  // not next to this test binary
-  auto service = Service::Open(config);
-  ASSERT_TRUE(service.ok()) << service.status().message();
+  std::unique_ptr<Service> service;
   std::atomic<int> streams{0}, uploads{0};
-  RouteContext context{service->get(), &config, [](std::string&) {}, &streams, &uploads};
-  const http::Router router = MakeRouter(context);
+  RouteContext context;
+  std::optional<http::Router> router;
+};
+
+TEST(OpenApi, TheServedSpecDescribesExactlyTheRoutesTheDaemonHas) {
+  RoutedService routed;
+  const Status opened = routed.Open();
+  ASSERT_TRUE(opened.ok()) << opened.message();
+  const http::Router& router = *routed.router;
   // (method, path) pairs of the spec: "  /path:" then "    get:" lines under "paths:".
   const std::string yaml(OpenApiYaml());
   EXPECT_EQ(yaml, testing::ReadFile(testing::SourcePath("proto/openapi.yaml")));
@@ -310,27 +335,20 @@ TEST(OpenApi, TheServedSpecDescribesExactlyTheRoutesTheDaemonHas) {
   for (const http::Route& route : router.routes()) served.insert({route.method, route.pattern});
   EXPECT_EQ(documented, served);
   EXPECT_GE(served.size(), 20u);
-  fs::remove_all(dir);
 }
 
 // The library's own stop() is lost when it comes before its listen loop has started: a
 // daemon sent SIGTERM right after it printed "listening on" served on. Stop() before
 // Run(), and Stop() while Run() is starting, must both end Run().
 TEST(HttpServer, StopEndsRunWhetherItComesBeforeOrWhileRunStarts) {
-  const fs::path dir = testing::TestDirectory();
-  Config config;
-  config.data_dir = (dir / "data").string();
-  config.import_worker = MOTIONLOD_IMPORT_WORKER;
-  config.port = 0;
-  config.http_threads = 2;
-  auto service = Service::Open(config);
-  ASSERT_TRUE(service.ok()) << service.status().message();
-  std::atomic<int> streams{0}, uploads{0};
-  RouteContext context{service->get(), &config, [](std::string&) {}, &streams, &uploads};
-  const http::Router router = MakeRouter(context);
-  HttpMetrics metrics(RouteLabels(router));
+  RoutedService routed;
+  routed.config.port = 0;
+  routed.config.http_threads = 2;
+  const Status opened = routed.Open();
+  ASSERT_TRUE(opened.ok()) << opened.message();
+  HttpMetrics metrics(RouteLabels(*routed.router));
   for (int round = 0; round < 40; ++round) {
-    HttpServer server(config, router, metrics);
+    HttpServer server(routed.config, *routed.router, metrics);
     ASSERT_TRUE(server.Bind().ok());
     const bool stop_before_run = round % 2 == 0;
     if (stop_before_run) server.Stop();
@@ -346,7 +364,6 @@ TEST(HttpServer, StopEndsRunWhetherItComesBeforeOrWhileRunStarts) {
     EXPECT_TRUE(result.get());
     if (!ended) break;
   }
-  fs::remove_all(dir);
 }
 
 }  // namespace
