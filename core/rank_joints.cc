@@ -7,6 +7,7 @@
 
 #include <Eigen/Core>
 
+#include "base/lanes.h"
 #include "base/simd.h"
 #include "core/chord_angle.h"
 
@@ -23,32 +24,52 @@ enum LocalRow { kW, kX, kY, kZ, kTx, kTy, kTz, kLocalRows };
 // (Shepperd's method: from w where the trace is positive, else from the largest diagonal
 // entry's axis), with selects instead of branches so that the frames' loop vectorises.
 // world[t * stride] is M(t), parent[t * stride] M_parent(t); both are invertible
-// (ValidateMotion).
+// (ValidateMotion). The matrices are first transposed into rows of `frames` in `scratch`
+// (24 rows), the root's parent as the identity (whose adjugate, determinant and translation
+// leave M as it is, exactly): read in place, a frame's matrices lie n matrices apart, and
+// the loop ran one frame at a time.
 void LocalTransforms(const Affine34d* world, const Affine34d* parent, size_t stride, int frames,
-                     double* __restrict rows) {
+                     double* __restrict scratch, double* __restrict rows) {
+  double* const m_rows = scratch;
+  double* const p_rows = scratch + 12 * frames;
+  // Three transposes of 4 rows each: one of 12 rows makes GCC 12 warn, wrongly, that its
+  // loop over the rows past the last whole 4 overflows.
+  const auto to_rows = [&](const Affine34d* matrices, double* out) {
+    for (int block = 0; block < 3; ++block) {
+      TransposeDoubles(matrices->data() + 4 * block, static_cast<long>(12 * stride), 4, frames,
+                       out + 4 * block * frames, frames);
+    }
+  };
+  to_rows(world, m_rows);
+  if (parent != nullptr) {
+    to_rows(parent, p_rows);
+  } else {
+    for (int e = 0; e < 12; ++e) {
+      std::fill_n(p_rows + e * frames, frames, e % 4 == 0 && e < 9 ? 1.0 : 0.0);
+    }
+  }
+  // Every row is `frames` long: no frame's writes reach another frame's reads or writes.
+#pragma GCC ivdep
   for (int t = 0; t < frames; ++t) {
-    const double* m = world[t * stride].data();  // column-major: m[3c + r] = M(r, c)
+    // Column-major: m[3c + r] = M(r, c).
+    const auto m = [&](int e) { return m_rows[e * frames + t]; };
+    const auto p = [&](int e) { return p_rows[e * frames + t]; };
     double l[12];
-    if (parent == nullptr) {
-      for (int e = 0; e < 12; ++e) l[e] = m[e];
-    } else {
-      // M_parent^-1 = adj(A) / det(A), A its 3x3 part.
-      const double* a = parent[t * stride].data();
-      const double c00 = a[4] * a[8] - a[7] * a[5], c01 = a[6] * a[5] - a[3] * a[8];
-      const double c02 = a[3] * a[7] - a[6] * a[4], c10 = a[7] * a[2] - a[1] * a[8];
-      const double c11 = a[0] * a[8] - a[6] * a[2], c12 = a[6] * a[1] - a[0] * a[7];
-      const double c20 = a[1] * a[5] - a[4] * a[2], c21 = a[3] * a[2] - a[0] * a[5];
-      const double c22 = a[0] * a[4] - a[3] * a[1];
-      const double inverse_det = 1 / (a[0] * c00 + a[3] * c10 + a[6] * c20);
-      for (int c = 0; c < 4; ++c) {
-        // Column c of M, or for the translation M's minus the parent's.
-        const double b0 = c < 3 ? m[3 * c] : m[9] - a[9];
-        const double b1 = c < 3 ? m[3 * c + 1] : m[10] - a[10];
-        const double b2 = c < 3 ? m[3 * c + 2] : m[11] - a[11];
-        l[3 * c] = (c00 * b0 + c01 * b1 + c02 * b2) * inverse_det;
-        l[3 * c + 1] = (c10 * b0 + c11 * b1 + c12 * b2) * inverse_det;
-        l[3 * c + 2] = (c20 * b0 + c21 * b1 + c22 * b2) * inverse_det;
-      }
+    // M_parent^-1 = adj(P) / det(P), P its 3x3 part.
+    const double c00 = p(4) * p(8) - p(7) * p(5), c01 = p(6) * p(5) - p(3) * p(8);
+    const double c02 = p(3) * p(7) - p(6) * p(4), c10 = p(7) * p(2) - p(1) * p(8);
+    const double c11 = p(0) * p(8) - p(6) * p(2), c12 = p(6) * p(1) - p(0) * p(7);
+    const double c20 = p(1) * p(5) - p(4) * p(2), c21 = p(3) * p(2) - p(0) * p(5);
+    const double c22 = p(0) * p(4) - p(3) * p(1);
+    const double inverse_det = 1 / (p(0) * c00 + p(3) * c10 + p(6) * c20);
+    for (int c = 0; c < 4; ++c) {
+      // Column c of M, or for the translation M's minus the parent's.
+      const double b0 = c < 3 ? m(3 * c) : m(9) - p(9);
+      const double b1 = c < 3 ? m(3 * c + 1) : m(10) - p(10);
+      const double b2 = c < 3 ? m(3 * c + 2) : m(11) - p(11);
+      l[3 * c] = (c00 * b0 + c01 * b1 + c02 * b2) * inverse_det;
+      l[3 * c + 1] = (c10 * b0 + c11 * b1 + c12 * b2) * inverse_det;
+      l[3 * c + 2] = (c20 * b0 + c21 * b1 + c22 * b2) * inverse_det;
     }
     for (int c = 0; c < 3; ++c) {
       const double length = std::sqrt(l[3 * c] * l[3 * c] + l[3 * c + 1] * l[3 * c + 1] +
@@ -119,16 +140,18 @@ StatusOr<JointRanking> RankJointsJob::Run(const PieceRunner& run) const {
   RunPieces(run, (n + kJointsPerPiece - 1) / kJointsPerPiece, [&](int piece) {
     RunWithWidestSimd([&] {
       std::vector<double> local(static_cast<size_t>(kLocalRows) * frames);
+      std::vector<double> scratch(24 * static_cast<size_t>(frames));
       std::vector<double> to_mean(frames), to_bind(frames), moved(frames);
       double* q[4] = {local.data() + kW * frames, local.data() + kX * frames,
                       local.data() + kY * frames, local.data() + kZ * frames};
       for (int j = piece * kJointsPerPiece; j < std::min(n, (piece + 1) * kJointsPerPiece); ++j) {
         const int parent = s.parents[j];
         double bind[kLocalRows];
-        LocalTransforms(&s.bind_world[j], parent < 0 ? nullptr : &s.bind_world[parent], 0, 1, bind);
+        LocalTransforms(&s.bind_world[j], parent < 0 ? nullptr : &s.bind_world[parent], 0, 1,
+                        scratch.data(), bind);
         LocalTransforms(&motion->joint_world[j],
                         parent < 0 ? nullptr : &motion->joint_world[parent], n, frames,
-                        local.data());
+                        scratch.data(), local.data());
         // Signs aligned with the bind rotation, so that q and -q average together.
         for (int t = 0; t < frames; ++t) {
           const double dot =

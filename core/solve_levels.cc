@@ -1137,8 +1137,13 @@ void PreparedMotion::Impl::FrameBounds(const DeltaView& delta, int t, MaxSearchB
                         kGroupBoundFrames, joint_bound);
           },
           u);
-      std::copy_n(u, batch_frames,
-                  bounds.group_bound.data() + static_cast<size_t>(j) * frames + batch_first);
+      // A whole batch as one vector: a copy of batch_frames doubles was a call to memcpy.
+      double* group_bound = bounds.group_bound.data() + static_cast<size_t>(j) * frames + batch_first;
+      if (batch_frames == kGroupBoundFrames) {
+        *AsLanes4(group_bound) = *AsLanes4(u);
+      } else {
+        std::copy_n(u, batch_frames, group_bound);
+      }
       const Lanes4 group = *AsLanes4(u);
       batch_bound = batch_bound < group ? group : batch_bound;
     }
