@@ -538,7 +538,14 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
   // zeroing F^T up front) kept the other thread waiting.
   d.ktt.resize(3 * frames, 4 * n);
   d.ft.resize(3 * frames, 4 * n);
-  RunPieces(run, (frames + kFramesPerPiece - 1) / kFramesPerPiece, [&](int piece) {
+  // The sample (which needs only Kt) is one more piece, the last: on two threads it runs
+  // beside the others instead of after them.
+  const int f_pieces = (frames + kFramesPerPiece - 1) / kFramesPerPiece;
+  RunPieces(run, f_pieces + 1, [&](int piece) {
+    if (piece == f_pieces) {
+      d.PrepareSample();
+      return;
+    }
     RunWithWidestSimd([&] {
       const Eigen::Index first = 3 * piece * kFramesPerPiece;
       const Eigen::Index rows = std::min<Eigen::Index>(3 * kFramesPerPiece, d.ft.rows() - first);
@@ -562,8 +569,6 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
   for (int j = 0; j < n; ++j) {
     d.joint_fit[j] = d.alpha * d.joint_cp[j] + d.beta_fit * d.joint_cn[j];
   }
-
-  d.PrepareSample();
   return std::shared_ptr<const PreparedMotion>(new PreparedMotion(std::move(impl)));
 }
 
@@ -1209,6 +1214,10 @@ PreparedMotion::Impl::MaxSearchStart PreparedMotion::Impl::MaxVertexError(
     const int* s_row = delta.solution_row.data();
     std::vector<std::pair<double, int>> group_order;  // (largest lane bound, group)
     group_order.reserve(n);
+    // The batch whose lanes joint k holds, -1 for the joints outside bounds.joints.
+    std::vector<int> filled_in_batch(n, -1);
+    for (int k : bounds.joints) filled_in_batch[k] = 0;
+    int batch = 0;
     // The bounds of a group's or a cluster's vertices (entry `index` of a CSR list of
     // influences) from their box, per lane.
     const auto weighted_box_bounds = [&](const std::vector<Character::InfluenceRange>& influences,
@@ -1230,38 +1239,47 @@ PreparedMotion::Impl::MaxSearchStart PreparedMotion::Impl::MaxVertexError(
           lane_used[f] = first + f < frame_order.size();
           lane_frame[f] = frame_order[lane_used[f] ? first + f : first];
         }
-        // Delta_k of the batch's frames in lanes. Frame t's Delta_k^T columns (DeltaView:
-        // column c of Delta_k^T is row c of Delta_k, four contiguous doubles) of the four
-        // frames are transposed into lanes as whole vectors: element by element, this copy
-        // was a third of the search.
+        // Delta_k of the batch's frames in lanes, for the joints that weight the groups the
+        // batch refines (and so their clusters), each the first time one needs it: all of
+        // them up front transposed joints that most batches never read. Frame t's Delta_k^T
+        // columns (DeltaView: column c of Delta_k^T is row c of Delta_k, four contiguous
+        // doubles) of the four frames are transposed into lanes as whole vectors: element by
+        // element, this copy was a third of the search. A joint outside bounds.joints keeps
+        // the zero lanes it started with (its Delta is zero).
         const double* s_frame[kLanes];
         const double* o_frame[kLanes];
         for (int f = 0; f < kLanes; ++f) {
           s_frame[f] = solution + 3 * lane_frame[f] * s_stride;
           o_frame[f] = original + 3 * lane_frame[f] * o_stride;
         }
-        for (int k : bounds.joints) {
-          LaneDelta<kLanes>& lanes = lane_delta[k];
-          float* lanes_f = lane_delta_f.data() + static_cast<size_t>(k) * 12 * kLanes;
-          const Eigen::Index s_offset = s_row[k], o_offset = 4 * k;  // not reloaded per store
-          for (int c = 0; c < 3; ++c) {
-            Lanes4 row[kLanes], by_column[4];
+        ++batch;
+        const auto fill_lanes = [&](int j) {
+          for (uint32_t q = group_influence_offsets[j]; q < group_influence_offsets[j + 1]; ++q) {
+            const int k = group_influences[q].joint;
+            if (filled_in_batch[k] == batch || filled_in_batch[k] < 0) continue;
+            filled_in_batch[k] = batch;
+            LaneDelta<kLanes>& lanes = lane_delta[k];
+            float* lanes_f = lane_delta_f.data() + static_cast<size_t>(k) * 12 * kLanes;
+            const Eigen::Index s_offset = s_row[k], o_offset = 4 * k;  // not reloaded per store
+            for (int c = 0; c < 3; ++c) {
+              Lanes4 row[kLanes], by_column[4];
+              for (int f = 0; f < kLanes; ++f) {
+                row[f] = *AsLanes4(s_frame[f] + c * s_stride + s_offset) -
+                         *AsLanes4(o_frame[f] + c * o_stride + o_offset);
+              }
+              Transpose4(row, by_column);
+              for (int a = 0; a < 4; ++a) {
+                *AsLanes4(lanes.m[3 * a + c]) = by_column[a];
+                *AsLanes4f(lanes_f + (3 * a + c) * kLanes) =
+                    __builtin_convertvector(by_column[a], Lanes4f);
+              }
+            }
             for (int f = 0; f < kLanes; ++f) {
-              row[f] = *AsLanes4(s_frame[f] + c * s_stride + s_offset) -
-                       *AsLanes4(o_frame[f] + c * o_stride + o_offset);
-            }
-            Transpose4(row, by_column);
-            for (int a = 0; a < 4; ++a) {
-              *AsLanes4(lanes.m[3 * a + c]) = by_column[a];
-              *AsLanes4f(lanes_f + (3 * a + c) * kLanes) =
-                  __builtin_convertvector(by_column[a], Lanes4f);
+              const Vec3d& norms = bounds.column_norms[static_cast<size_t>(lane_frame[f]) * n + k];
+              for (int a = 0; a < 3; ++a) lanes.column_norms[a][f] = norms[a];
             }
           }
-          for (int f = 0; f < kLanes; ++f) {
-            const Vec3d& norms = bounds.column_norms[static_cast<size_t>(lane_frame[f]) * n + k];
-            for (int a = 0; a < 3; ++a) lanes.column_norms[a][f] = norms[a];
-          }
-        }
+        };
         const auto group_bound = [&](int f, int j) {
           return lane_used[f] ? bounds.group_bound[static_cast<size_t>(j) * frames + lane_frame[f]]
                               : 0.0;
@@ -1277,6 +1295,7 @@ PreparedMotion::Impl::MaxSearchStart PreparedMotion::Impl::MaxVertexError(
                   [](const auto& a, const auto& b) { return a.first > b.first; });
         for (const auto& [largest, j] : group_order) {
           if (largest <= std::max(best, floor)) break;
+          fill_lanes(j);
           bool open[kLanes];  // the lanes whose bound beats the best so far
           double refined[kLanes];
           weighted_box_bounds(group_influences, group_influence_offsets, j, c.group_centers()[j],
