@@ -215,15 +215,11 @@ struct PreparedMotion::Impl {
   struct MaxSearchBounds {
     std::vector<int> groups;          // the groups bounded (nonempty ones)
     std::vector<int> joints;          // the joints that weight them (their Delta is read)
-    std::vector<Vec3d> column_norms;  // T x n: column norms of Delta_k(t)'s 3x3 part
     std::vector<double> group_bound;  // n x T: bound of group j's vertices in frame t at jT + t
     std::vector<double> frame_bound;  // T
     // Scratch: the joints' box bounds U_k in the frames of the batch of kGroupBoundFrames
     // that FrameBounds is filling, joint k's at kGroupBoundFrames k.
     std::vector<double> joint_bound;
-    // The boxes of `joints`, four joints at a time (FrameBounds' lanes): lanes of their
-    // centers' x, y, z, then of their half extents' x, y, z (24 doubles per group).
-    std::vector<double> joint_boxes;
   };
   // Bounds of every nonempty group, or (group_mask) of the groups it flags, for T frames,
   // and of those only where a joint that `moving` flags weights them, from those joints
@@ -297,7 +293,7 @@ struct PreparedMotion::Impl {
                             Eigen::Matrix<double, Eigen::Dynamic, 3>& kept_frame,
                             const std::vector<int>& kept, const std::vector<int>& moving_kept,
                             int t, LevelErrors& out) const;
-  // Frames must come in order, 0 to T - 1: the group bounds are written a batch of
+  // Called for every frame, 0 to T - 1: the bounds are computed a batch of
   // kGroupBoundFrames frames at a time, when the batch's last frame (or frame T - 1) comes.
   static constexpr int kGroupBoundFrames = 4;
   void FrameBounds(const DeltaView& delta, int t, MaxSearchBounds& bounds) const;
@@ -1052,54 +1048,48 @@ PreparedMotion::Impl::MaxSearchBounds PreparedMotion::Impl::MakeMaxSearchBounds(
   for (int k = 0; k < n; ++k) {
     if (weights_a_group[k] && moving[k]) bounds.joints.push_back(k);
   }
-  bounds.column_norms.resize(static_cast<size_t>(frames) * n);
   bounds.group_bound.assign(static_cast<size_t>(frames) * n, 0.0);
   bounds.frame_bound.assign(frames, 0.0);
   bounds.joint_bound.assign(static_cast<size_t>(n) * kGroupBoundFrames, 0.0);
-  const size_t count = bounds.joints.size();
-  bounds.joint_boxes.assign(24 * ((count + 3) / 4), 0.0);
-  for (size_t e = 0; e < count; ++e) {
-    double* box = bounds.joint_boxes.data() + 24 * (e / 4) + e % 4;
-    const int k = bounds.joints[e];
-    for (int a = 0; a < 3; ++a) {
-      box[4 * a] = c.joint_vertex_centers()[k][a];
-      box[4 * (3 + a)] = c.joint_vertex_half_extents()[k][a];
-    }
-  }
   return bounds;
 }
 
 void PreparedMotion::Impl::FrameBounds(const DeltaView& delta, int t, MaxSearchBounds& bounds) const {
+  if (t % kGroupBoundFrames != kGroupBoundFrames - 1 && t != frames - 1) return;
   RunWithWidestSimd([&] {
     // Coarse bounds for every group from the joints' own boxes (one box bound per joint); a
     // visited group is refined with its own box.
     const Character& c = *character;
     const auto& group_influence_offsets = c.group_influence_offsets();
     const auto& group_influences = c.group_influences();
-    Vec3d* norms = bounds.column_norms.data() + static_cast<size_t>(t) * n;
-    // Delta_k's rows read as DeltaView::Frame forms them, without a copy of the frame.
-    const double* solution = delta.solution->data() + 3 * t * delta.solution->rows();
-    const double* original = delta.original->data() + 3 * t * delta.original->rows();
+    static_assert(kGroupBoundFrames == 4, "a batch's bounds are one Lanes4");
+    const int batch_first = t - t % kGroupBoundFrames, batch_frames = t - batch_first + 1;
+    // Delta_k's rows read as DeltaView::Frame forms them, without a copy of the frames; a
+    // batch past the last frame repeats its last frame in the lanes it lacks, unused.
     const Eigen::Index s_stride = delta.solution->rows(), o_stride = delta.original->rows();
+    const double* s_frame[kGroupBoundFrames];
+    const double* o_frame[kGroupBoundFrames];
+    for (int f = 0; f < kGroupBoundFrames; ++f) {
+      const int frame = batch_first + std::min(f, batch_frames - 1);
+      s_frame[f] = delta.solution->data() + 3 * frame * s_stride;
+      o_frame[f] = delta.original->data() + 3 * frame * o_stride;
+    }
     const int* s_row = delta.solution_row.data();
-    const size_t count = bounds.joints.size();
-    // LaneDelta::BoxBounds' U_k for each joint's box, with the column norms it needs, four
-    // joints at a time, one per lane: each row of Delta_k (four contiguous doubles) of the
-    // four joints transposed into lanes, then every sum and square root as whole vectors.
-    // (A joint at a time, the sums were scalar and their vector of four roots waited on
-    // shuffles.) The last group repeats its last joint in the lanes it lacks.
-    for (size_t first = 0; first < count; first += 4) {
-      int k[4];
-      for (size_t j = 0; j < 4; ++j) k[j] = bounds.joints[std::min(first + j, count - 1)];
-      const double* boxes = bounds.joint_boxes.data() + 24 * (first / 4);
-      Lanes4 box[6];
-      for (int q = 0; q < 6; ++q) box[q] = *AsLanes4(boxes + 4 * q);
-      Lanes4 entry[3][4];  // entry[i][a]: Delta_k(i, a) of the four joints
+    // LaneDelta::BoxBounds' U_k for each joint's box in the batch's frames, one per lane:
+    // each row of Delta_k (four contiguous doubles) of the four frames transposed into
+    // lanes, then every sum and square root as whole vectors, and U_k stored as one.
+    // (Frame by frame with four joints in the lanes, each frame's U_k and the column norms
+    // the search read were stored one double at a time.)
+    for (int k : bounds.joints) {
+      const Vec3d& center = c.joint_vertex_centers()[k];
+      const Vec3d& half = c.joint_vertex_half_extents()[k];
+      const Eigen::Index s_offset = s_row[k], o_offset = 4 * k;
+      Lanes4 entry[3][4];  // entry[i][a]: Delta_k(i, a) in the four frames
       for (int i = 0; i < 3; ++i) {
-        Lanes4 row[4];
-        for (int j = 0; j < 4; ++j) {
-          row[j] = *AsLanes4(solution + i * s_stride + s_row[k[j]]) -
-                   *AsLanes4(original + i * o_stride + 4 * k[j]);
+        Lanes4 row[kGroupBoundFrames];
+        for (int f = 0; f < kGroupBoundFrames; ++f) {
+          row[f] = *AsLanes4(s_frame[f] + i * s_stride + s_offset) -
+                   *AsLanes4(o_frame[f] + i * o_stride + o_offset);
         }
         Transpose4(row, entry[i]);
       }
@@ -1110,26 +1100,19 @@ void PreparedMotion::Impl::FrameBounds(const DeltaView& delta, int t, MaxSearchB
       }
       squared[3] = Lanes4{};
       for (int i = 0; i < 3; ++i) {
-        const Lanes4 moved =
-            entry[i][0] * box[0] + entry[i][1] * box[1] + entry[i][2] * box[2] + entry[i][3];
+        const Lanes4 moved = entry[i][0] * center[0] + entry[i][1] * center[1] +
+                             entry[i][2] * center[2] + entry[i][3];
         squared[3] += moved * moved;
       }
       Lanes4 root[4];
       for (int a = 0; a < 4; ++a) {
-        for (int j = 0; j < 4; ++j) root[a][j] = std::sqrt(squared[a][j]);
+        for (int f = 0; f < kGroupBoundFrames; ++f) root[a][f] = std::sqrt(squared[a][f]);
       }
-      const Lanes4 joint_bound = root[3] + root[0] * box[3] + root[1] * box[4] + root[2] * box[5];
-      const int lane = t % kGroupBoundFrames;
-      for (size_t j = 0; j < 4 && first + j < count; ++j) {
-        norms[k[j]] = Vec3d(root[0][j], root[1][j], root[2][j]);
-        bounds.joint_bound[static_cast<size_t>(k[j]) * kGroupBoundFrames + lane] = joint_bound[j];
-      }
+      *AsLanes4(bounds.joint_bound.data() + static_cast<size_t>(k) * kGroupBoundFrames) =
+          root[3] + root[0] * half[0] + root[1] * half[1] + root[2] * half[2];
     }
-    // The groups' bounds of a batch of frames at once, one frame per lane: a frame at a
-    // time, the weighted bound of each group was scalar, most of FrameBounds' time.
-    if (t % kGroupBoundFrames != kGroupBoundFrames - 1 && t != frames - 1) return;
-    const int batch_first = t - t % kGroupBoundFrames, batch_frames = t - batch_first + 1;
-    static_assert(kGroupBoundFrames == 4, "a batch's bounds are one Lanes4");
+    // The groups' bounds of the batch, one frame per lane: a frame at a time, the weighted
+    // bound of each group was scalar, most of FrameBounds' time.
     Lanes4 batch_bound = {};  // each frame's largest group bound
     for (int j : bounds.groups) {
       double u[kGroupBoundFrames];
@@ -1274,9 +1257,12 @@ PreparedMotion::Impl::MaxSearchStart PreparedMotion::Impl::MaxVertexError(
                     __builtin_convertvector(by_column[a], Lanes4f);
               }
             }
-            for (int f = 0; f < kLanes; ++f) {
-              const Vec3d& norms = bounds.column_norms[static_cast<size_t>(lane_frame[f]) * n + k];
-              for (int a = 0; a < 3; ++a) lanes.column_norms[a][f] = norms[a];
+            // The column norms of its 3x3 part, as FrameBounds computes them.
+            for (int a = 0; a < 3; ++a) {
+              const Lanes4 x = *AsLanes4(lanes.m[3 * a]), y = *AsLanes4(lanes.m[3 * a + 1]);
+              const Lanes4 z = *AsLanes4(lanes.m[3 * a + 2]);
+              const Lanes4 squared = x * x + y * y + z * z;
+              for (int f = 0; f < kLanes; ++f) lanes.column_norms[a][f] = std::sqrt(squared[f]);
             }
           }
         };
