@@ -891,27 +891,29 @@ void PreparedMotion::Impl::FrameQuadraticErrors(
 
 namespace {
 
-// Delta_g in kLanes frames, lane by lane (the maximum search bounds a batch of frames at
+// Delta_g in four frames, lane by lane (the maximum search bounds a batch of frames at
 // once): entry 3a + i of m is Delta_g(i, a) (a = 3: the translation), then the column
 // norms of its 3x3 part.
-template <int kLanes>
 struct LaneDelta {
+  static constexpr int kLanes = 4;
   double m[12][kLanes];
   double column_norms[3][kLanes];
 
   // The bounds of the maximum search (see MaxVertexError) for a box with center c and half
-  // extents h: U_g = |Delta_g [c;1]| + sum_a |Delta_g(3x3) e_a| h_a in each lane, every loop
-  // over the lanes one whole vector.
-  void BoxBounds(const Vec3d& center, const Vec3d& half, double* __restrict u) const {
-    for (int f = 0; f < kLanes; ++f) {
-      double moved[3];
-      for (int i = 0; i < 3; ++i)
-        moved[i] =
-            m[i][f] * center[0] + m[3 + i][f] * center[1] + m[6 + i][f] * center[2] + m[9 + i][f];
-      u[f] = std::sqrt(moved[0] * moved[0] + moved[1] * moved[1] + moved[2] * moved[2]) +
-             column_norms[0][f] * half[0] + column_norms[1][f] * half[1] +
-             column_norms[2][f] * half[2];
+  // extents h: U_g = |Delta_g [c;1]| + sum_a |Delta_g(3x3) e_a| h_a in each lane.
+  // (Vectors go out through references: returned by value, they would change the
+  // baseline version's calling convention, which GCC warns of.)
+  void BoxBounds(const Vec3d& center, const Vec3d& half, Lanes4& u) const {
+    Lanes4 moved[3];
+    for (int i = 0; i < 3; ++i) {
+      moved[i] = *AsLanes4(m[i]) * center[0] + *AsLanes4(m[3 + i]) * center[1] +
+                 *AsLanes4(m[6 + i]) * center[2] + *AsLanes4(m[9 + i]);
     }
+    const Lanes4 squared = moved[0] * moved[0] + moved[1] * moved[1] + moved[2] * moved[2];
+    Lanes4 length;
+    for (int f = 0; f < kLanes; ++f) length[f] = std::sqrt(squared[f]);
+    u = length + *AsLanes4(column_norms[0]) * half[0] + *AsLanes4(column_norms[1]) * half[1] +
+        *AsLanes4(column_norms[2]) * half[2];
   }
 };
 
@@ -927,49 +929,49 @@ struct LaneDelta {
 // The breakpoints past lambda = 0 and max_g U_g cost a pass over the joints each: with
 // kRefine they are tried where one of those two is above `threshold` (nothing to gain
 // below it); without, the two alone (the per-frame group bounds, computed for every group).
-// For kLanes frames at once (the maximum search's batches): bound_of(g, u) writes U_g of
-// each into u[kLanes], and out[kLanes] gets each frame's bound, every loop over the lanes
-// one whole vector.
-template <int kLanes, bool kRefine, typename BoundOf>
+// For four frames at once, one per lane (the maximum search's batches): bound_of(g, u)
+// sets U_g of each, and `out` gets each frame's bound. Written with vector types: GCC left
+// the plain loops over the four lanes scalar, and a bound stored one lane at a time and
+// read back as a vector waited for the stores to retire.
+template <bool kRefine, typename BoundOf>
 void WeightedBound(const Character::InfluenceRange* begin, const Character::InfluenceRange* end,
-                   double threshold, BoundOf&& bound_of, double* __restrict out) {
+                   double threshold, BoundOf&& bound_of, Lanes4& out) {
   // Weights sum to 1 within the validation's tolerance.
   constexpr double kWeightSum = 1.0 + 1e-3;
   constexpr int kMaxJoints = 8;
   const auto count = static_cast<int>(std::min<std::ptrdiff_t>(end - begin, kMaxJoints));
-  double u[kMaxJoints][kLanes], span[kMaxJoints];  // the first `count` entries
-  double floor[kLanes] = {}, largest[kLanes] = {}, widest[kLanes] = {}, bound[kLanes];
+  Lanes4 u[kMaxJoints];  // the first `count` entries
+  double span[kMaxJoints];
+  Lanes4 floor = {}, largest = {}, widest = {};
   double budget = kWeightSum;
   for (const Character::InfluenceRange* q = begin; q != end; ++q) {
+    Lanes4 bound;
     bound_of(q->joint, bound);
-    for (int f = 0; f < kLanes; ++f) {
-      floor[f] += q->min_weight * bound[f];
-      largest[f] = std::max(largest[f], bound[f]);
-      widest[f] += q->max_weight * bound[f];
-    }
+    floor += static_cast<double>(q->min_weight) * bound;
+    largest = largest < bound ? bound : largest;
+    widest += static_cast<double>(q->max_weight) * bound;
     budget -= q->min_weight;
     if (const auto index = q - begin; kRefine && index < kMaxJoints) {
-      for (int f = 0; f < kLanes; ++f) u[index][f] = bound[f];
+      u[index] = bound;
       span[index] = q->max_weight - q->min_weight;
     }
   }
   budget = std::max(budget, 0.0);
   // lambda = 0 and lambda = max_g U_g hold for any number of joints; the other breakpoints
   // are tried for lists of up to kMaxJoints (a cluster's few joints).
-  bool above = false;
-  for (int f = 0; f < kLanes; ++f) {
-    out[f] = std::min(widest[f], floor[f] + largest[f] * budget);
-    above = above || out[f] > threshold;
-  }
-  if (!kRefine || !above || end - begin > kMaxJoints) return;
+  const Lanes4 at_largest = floor + largest * budget;
+  out = at_largest < widest ? at_largest : widest;
+  if (!kRefine || end - begin > kMaxJoints) return;
+  const auto above = out > threshold;
+  if (!(above[0] || above[1] || above[2] || above[3])) return;
   // f at the breakpoints lambda = U_b (lambda = 0 is `widest`), each over the lanes at once.
   for (int b = 0; b < count; ++b) {
-    double value[kLanes];
-    for (int f = 0; f < kLanes; ++f) value[f] = floor[f] + u[b][f] * budget;
+    Lanes4 value = floor + u[b] * budget;
     for (int g = 0; g < count; ++g) {
-      for (int f = 0; f < kLanes; ++f) value[f] += span[g] * std::max(0.0, u[g][f] - u[b][f]);
+      const Lanes4 past = u[g] - u[b];
+      value += span[g] * (0.0 < past ? past : Lanes4{});
     }
-    for (int f = 0; f < kLanes; ++f) out[f] = std::min(out[f], value[f]);
+    out = value < out ? value : out;
   }
 }
 
@@ -1115,24 +1117,22 @@ void PreparedMotion::Impl::FrameBounds(const DeltaView& delta, int t, MaxSearchB
     // bound of each group was scalar, most of FrameBounds' time.
     Lanes4 batch_bound = {};  // each frame's largest group bound
     for (int j : bounds.groups) {
-      double u[kGroupBoundFrames];
-      WeightedBound<kGroupBoundFrames, false>(
+      Lanes4 group;
+      WeightedBound<false>(
           group_influences.data() + group_influence_offsets[j],
           group_influences.data() + group_influence_offsets[j + 1],
           std::numeric_limits<double>::infinity(),
-          [&](int g, double* joint_bound) {
-            std::copy_n(bounds.joint_bound.data() + static_cast<size_t>(g) * kGroupBoundFrames,
-                        kGroupBoundFrames, joint_bound);
+          [&](int g, Lanes4& u) {
+            u = *AsLanes4(bounds.joint_bound.data() + static_cast<size_t>(g) * kGroupBoundFrames);
           },
-          u);
+          group);
       // A whole batch as one vector: a copy of batch_frames doubles was a call to memcpy.
       double* group_bound = bounds.group_bound.data() + static_cast<size_t>(j) * frames + batch_first;
       if (batch_frames == kGroupBoundFrames) {
-        *AsLanes4(group_bound) = *AsLanes4(u);
+        *AsLanes4(group_bound) = group;
       } else {
-        std::copy_n(u, batch_frames, group_bound);
+        for (int f = 0; f < batch_frames; ++f) group_bound[f] = group[f];
       }
-      const Lanes4 group = *AsLanes4(u);
       batch_bound = batch_bound < group ? group : batch_bound;
     }
     for (int f = 0; f < batch_frames; ++f) bounds.frame_bound[batch_first + f] = batch_bound[f];
@@ -1184,9 +1184,9 @@ PreparedMotion::Impl::MaxSearchStart PreparedMotion::Impl::MaxVertexError(
     // Frames are searched in batches of kLanes, taken in that order: every bound is computed
     // for the whole batch at once, one frame per lane of a vector (the frames of a batch
     // have similar bounds, and most of them need the same groups and clusters bounded).
-    constexpr int kLanes = 4;
+    constexpr int kLanes = LaneDelta::kLanes;
     static_assert(kLanes == 4, "a batch's Delta_k is transposed as Lanes4");
-    std::vector<LaneDelta<kLanes>> lane_delta(n);
+    std::vector<LaneDelta> lane_delta(n);
     // The exact evaluations blend in float (the skin's own precision): twice the throughput,
     // and the figure is a display quantity. Entry (12 k + 3a + i) kLanes + f: Delta_k(i, a)
     // of lane f's frame.
@@ -1206,10 +1206,12 @@ PreparedMotion::Impl::MaxSearchStart PreparedMotion::Impl::MaxVertexError(
     const auto weighted_box_bounds = [&](const std::vector<Character::InfluenceRange>& influences,
                                          const std::vector<uint32_t>& offsets, size_t index,
                                          const Vec3d& center, const Vec3d& half, double* bound) {
-      WeightedBound<kLanes, true>(
+      Lanes4 lanes;
+      WeightedBound<true>(
           influences.data() + offsets[index], influences.data() + offsets[index + 1],
-          std::max(best, floor),
-          [&](int g, double* u) { lane_delta[g].BoxBounds(center, half, u); }, bound);
+          std::max(best, floor), [&](int g, Lanes4& u) { lane_delta[g].BoxBounds(center, half, u); },
+          lanes);
+      *AsLanes4(bound) = lanes;
     };
     // A lambda, so that a decided search returns from every loop at once.
     const auto search = [&] {
@@ -1241,7 +1243,7 @@ PreparedMotion::Impl::MaxSearchStart PreparedMotion::Impl::MaxVertexError(
             const int k = group_influences[q].joint;
             if (filled_in_batch[k] == batch || filled_in_batch[k] < 0) continue;
             filled_in_batch[k] = batch;
-            LaneDelta<kLanes>& lanes = lane_delta[k];
+            LaneDelta& lanes = lane_delta[k];
             float* lanes_f = lane_delta_f.data() + static_cast<size_t>(k) * 12 * kLanes;
             const Eigen::Index s_offset = s_row[k], o_offset = 4 * k;  // not reloaded per store
             for (int c = 0; c < 3; ++c) {
