@@ -1710,14 +1710,20 @@ StatusOr<LevelResult> PreparedMotion::SolveOptimized(const ReducedSkeleton& leve
   result.skeleton = level;
   result.matrices.resize(static_cast<size_t>(d.frames) * m);
   // Row r of K'_s(t) is column 3t + r of x from row 4s: four contiguous doubles, converted
-  // as one vector into the row-major matrix's row.
+  // as one vector into the row-major matrix's row. (The pointers and the stride are local:
+  // a store through a vector type that may alias anything would reload them after every
+  // row.)
+  static_assert(sizeof(RowMajorAffine34f) == 12 * sizeof(float));
+  float* out = result.matrices.front().data();
+  const double* columns = x.data();
+  const Eigen::Index stride = x.rows();
   for (int t = 0; t < d.frames; ++t) {
     for (int s = 0; s < m; ++s) {
-      float* rows = result.matrices[static_cast<size_t>(t) * m + s].data();
       for (int r = 0; r < 3; ++r) {
-        *AsLanes4f(rows + 4 * r) =
-            __builtin_convertvector(*AsLanes4(x.data() + (3 * t + r) * x.rows() + 4 * s), Lanes4f);
+        *AsLanes4f(out + 4 * r) =
+            __builtin_convertvector(*AsLanes4(columns + (3 * t + r) * stride + 4 * s), Lanes4f);
       }
+      out += 12;
     }
   }
   d.EvaluateErrors(solution->Delta(d, level), level.kept_joints, Impl::Figures::kAll, result.optimized,
