@@ -1345,9 +1345,22 @@ void PreparedMotion::Impl::SampleFrameValues(const Eigen::Matrix<double, Eigen::
                                              SampleScratch& scratch, SampleValues& values) const {
   RunWithWidestSimd([&] {
     // Blends in float, as the maximum search: the rounding is relative to Delta itself.
+    // Column a of Delta_k (a zero last row) is lane a of frame's three columns of joint k
+    // and of zero: transposed as whole vectors and stored one column at a time (Eigen's
+    // transposed cast stored one float at a time, and the blends read them back as vectors).
     std::vector<PaddedDelta>& frame_delta = scratch.frame_delta;
-    for (int k = 0; k < n; ++k)
-      frame_delta[k].topRows<3>() = frame.block<4, 3>(4 * k, 0).transpose().cast<float>();
+    const double* columns = frame.data();
+    const Eigen::Index stride = frame.rows();
+    for (int k = 0; k < n; ++k) {
+      const Lanes4 rows[4] = {*AsLanes4(columns + 4 * k), *AsLanes4(columns + stride + 4 * k),
+                              *AsLanes4(columns + 2 * stride + 4 * k), Lanes4{}};
+      Lanes4 delta_columns[4];
+      Transpose4(rows, delta_columns);
+      float* target = frame_delta[k].data();
+      for (int a = 0; a < 4; ++a) {
+        *AsLanes4f(target + 4 * a) = __builtin_convertvector(delta_columns[a], Lanes4f);
+      }
+    }
     const size_t all = sample_vertices.size();
     const size_t count = vertices ? vertices->size() : all;
     const double* normals = sample_normals.data() + 4 * q * all;
