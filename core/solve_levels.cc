@@ -899,6 +899,31 @@ struct LaneDelta {
   double m[12][kLanes];
   double column_norms[3][kLanes];
 
+  // Sets Delta_g of the four frames whose columns start at solution[f] and original[f]
+  // (DeltaView: column c of Delta_g^T is row c of Delta_g, four contiguous doubles from
+  // solution_offset and original_offset) and its column norms. Each row of the four frames
+  // is transposed into lanes as whole vectors: element by element, this copy was a third
+  // of the search.
+  void Fill(const double* const solution[kLanes], const double* const original[kLanes],
+            Eigen::Index solution_stride, Eigen::Index original_stride,
+            Eigen::Index solution_offset, Eigen::Index original_offset) {
+    for (int c = 0; c < 3; ++c) {
+      Lanes4 row[kLanes], by_column[4];
+      for (int f = 0; f < kLanes; ++f) {
+        row[f] = *AsLanes4(solution[f] + c * solution_stride + solution_offset) -
+                 *AsLanes4(original[f] + c * original_stride + original_offset);
+      }
+      Transpose4(row, by_column);
+      for (int a = 0; a < 4; ++a) *AsLanes4(m[3 * a + c]) = by_column[a];
+    }
+    for (int a = 0; a < 3; ++a) {
+      const Lanes4 x = *AsLanes4(m[3 * a]), y = *AsLanes4(m[3 * a + 1]);
+      const Lanes4 z = *AsLanes4(m[3 * a + 2]);
+      const Lanes4 squared = x * x + y * y + z * z;
+      for (int f = 0; f < kLanes; ++f) column_norms[a][f] = std::sqrt(squared[f]);
+    }
+  }
+
   // The bounds of the maximum search (see MaxVertexError) for a box with center c and half
   // extents h: U_g = |Delta_g [c;1]| + sum_a |Delta_g(3x3) e_a| h_a in each lane.
   // (Vectors go out through references: returned by value, they would change the
@@ -1077,41 +1102,16 @@ void PreparedMotion::Impl::FrameBounds(const DeltaView& delta, int t, MaxSearchB
       o_frame[f] = delta.original->data() + 3 * frame * o_stride;
     }
     const int* s_row = delta.solution_row.data();
-    // LaneDelta::BoxBounds' U_k for each joint's box in the batch's frames, one per lane:
-    // each row of Delta_k (four contiguous doubles) of the four frames transposed into
-    // lanes, then every sum and square root as whole vectors, and U_k stored as one.
-    // (Frame by frame with four joints in the lanes, each frame's U_k and the column norms
-    // the search read were stored one double at a time.)
+    // U_k for each joint's own box in the batch's frames (LaneDelta::BoxBounds), one frame
+    // per lane, stored as one vector. (Frame by frame with four joints in the lanes, each
+    // frame's U_k and the column norms the search read were stored one double at a time.)
+    static_assert(LaneDelta::kLanes == kGroupBoundFrames);
+    LaneDelta lanes;
     for (int k : bounds.joints) {
-      const Vec3d& center = c.joint_vertex_centers()[k];
-      const Vec3d& half = c.joint_vertex_half_extents()[k];
-      const Eigen::Index s_offset = s_row[k], o_offset = 4 * k;
-      Lanes4 entry[3][4];  // entry[i][a]: Delta_k(i, a) in the four frames
-      for (int i = 0; i < 3; ++i) {
-        Lanes4 row[kGroupBoundFrames];
-        for (int f = 0; f < kGroupBoundFrames; ++f) {
-          row[f] = *AsLanes4(s_frame[f] + i * s_stride + s_offset) -
-                   *AsLanes4(o_frame[f] + i * o_stride + o_offset);
-        }
-        Transpose4(row, entry[i]);
-      }
-      Lanes4 squared[4];
-      for (int a = 0; a < 3; ++a) {
-        squared[a] =
-            entry[0][a] * entry[0][a] + entry[1][a] * entry[1][a] + entry[2][a] * entry[2][a];
-      }
-      squared[3] = Lanes4{};
-      for (int i = 0; i < 3; ++i) {
-        const Lanes4 moved = entry[i][0] * center[0] + entry[i][1] * center[1] +
-                             entry[i][2] * center[2] + entry[i][3];
-        squared[3] += moved * moved;
-      }
-      Lanes4 root[4];
-      for (int a = 0; a < 4; ++a) {
-        for (int f = 0; f < kGroupBoundFrames; ++f) root[a][f] = std::sqrt(squared[a][f]);
-      }
-      *AsLanes4(bounds.joint_bound.data() + static_cast<size_t>(k) * kGroupBoundFrames) =
-          root[3] + root[0] * half[0] + root[1] * half[1] + root[2] * half[2];
+      lanes.Fill(s_frame, o_frame, s_stride, o_stride, s_row[k], 4 * k);
+      Lanes4 u;
+      lanes.BoxBounds(c.joint_vertex_centers()[k], c.joint_vertex_half_extents()[k], u);
+      *AsLanes4(bounds.joint_bound.data() + static_cast<size_t>(k) * kGroupBoundFrames) = u;
     }
     // The groups' bounds of the batch, one frame per lane: a frame at a time, the weighted
     // bound of each group was scalar, most of FrameBounds' time.
@@ -1224,13 +1224,11 @@ PreparedMotion::Impl::MaxSearchStart PreparedMotion::Impl::MaxVertexError(
           lane_used[f] = first + f < frame_order.size();
           lane_frame[f] = frame_order[lane_used[f] ? first + f : first];
         }
-        // Delta_k of the batch's frames in lanes, for the joints that weight the groups the
-        // batch refines (and so their clusters), each the first time one needs it: all of
-        // them up front transposed joints that most batches never read. Frame t's Delta_k^T
-        // columns (DeltaView: column c of Delta_k^T is row c of Delta_k, four contiguous
-        // doubles) of the four frames are transposed into lanes as whole vectors: element by
-        // element, this copy was a third of the search. A joint outside bounds.joints keeps
-        // the zero lanes it started with (its Delta is zero).
+        // Delta_k of the batch's frames in lanes (LaneDelta::Fill), for the joints that
+        // weight the groups the batch refines (and so their clusters), each the first time
+        // one needs it: all of them up front transposed joints that most batches never read.
+        // A joint outside bounds.joints keeps the zero lanes it started with (its Delta is
+        // zero).
         const double* s_frame[kLanes];
         const double* o_frame[kLanes];
         for (int f = 0; f < kLanes; ++f) {
@@ -1244,27 +1242,11 @@ PreparedMotion::Impl::MaxSearchStart PreparedMotion::Impl::MaxVertexError(
             if (filled_in_batch[k] == batch || filled_in_batch[k] < 0) continue;
             filled_in_batch[k] = batch;
             LaneDelta& lanes = lane_delta[k];
+            lanes.Fill(s_frame, o_frame, s_stride, o_stride, s_row[k], 4 * k);
             float* lanes_f = lane_delta_f.data() + static_cast<size_t>(k) * 12 * kLanes;
-            const Eigen::Index s_offset = s_row[k], o_offset = 4 * k;  // not reloaded per store
-            for (int c = 0; c < 3; ++c) {
-              Lanes4 row[kLanes], by_column[4];
-              for (int f = 0; f < kLanes; ++f) {
-                row[f] = *AsLanes4(s_frame[f] + c * s_stride + s_offset) -
-                         *AsLanes4(o_frame[f] + c * o_stride + o_offset);
-              }
-              Transpose4(row, by_column);
-              for (int a = 0; a < 4; ++a) {
-                *AsLanes4(lanes.m[3 * a + c]) = by_column[a];
-                *AsLanes4f(lanes_f + (3 * a + c) * kLanes) =
-                    __builtin_convertvector(by_column[a], Lanes4f);
-              }
-            }
-            // The column norms of its 3x3 part, as FrameBounds computes them.
-            for (int a = 0; a < 3; ++a) {
-              const Lanes4 x = *AsLanes4(lanes.m[3 * a]), y = *AsLanes4(lanes.m[3 * a + 1]);
-              const Lanes4 z = *AsLanes4(lanes.m[3 * a + 2]);
-              const Lanes4 squared = x * x + y * y + z * z;
-              for (int f = 0; f < kLanes; ++f) lanes.column_norms[a][f] = std::sqrt(squared[f]);
+            for (int e = 0; e < 12; ++e) {
+              *AsLanes4f(lanes_f + e * kLanes) =
+                  __builtin_convertvector(*AsLanes4(lanes.m[e]), Lanes4f);
             }
           }
         };
