@@ -47,8 +47,9 @@ struct RawCharacter {
 };
 
 // Checks every field combination of RawCharacter; the message names the first
-// offending joint, vertex or triangle.
-Status ValidateRawCharacter(const RawCharacter& raw);
+// offending joint, vertex or triangle. `run`: where its pieces of vertices run
+// (base/pieces.h); the result is the same.
+Status ValidateRawCharacter(const RawCharacter& raw, const PieceRunner& run = {});
 
 class Character {
  public:

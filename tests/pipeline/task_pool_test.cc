@@ -1,6 +1,8 @@
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
+#include <cmath>
 #include <chrono>
 #include <filesystem>
 #include <thread>
@@ -150,6 +152,21 @@ TEST(TaskPool, BuildsTheSameCharacterAsOneThread) {
     EXPECT_EQ(split->cluster_vertex_offsets(), one->cluster_vertex_offsets()) << file;
     EXPECT_EQ(split->cluster_centers(), one->cluster_centers()) << file;
     EXPECT_EQ(split->group_cluster_offsets(), one->group_cluster_offsets()) << file;
+    EXPECT_EQ(split->group_centers(), one->group_centers()) << file;
+    EXPECT_EQ(split->group_half_extents(), one->group_half_extents()) << file;
+    EXPECT_EQ(split->cluster_half_extents(), one->cluster_half_extents()) << file;
+    EXPECT_EQ(split->group_influence_offsets(), one->group_influence_offsets()) << file;
+    EXPECT_EQ(split->cluster_influence_offsets(), one->cluster_influence_offsets()) << file;
+    const auto same_ranges = [](const std::vector<core::Character::InfluenceRange>& a,
+                                const std::vector<core::Character::InfluenceRange>& b) {
+      return std::equal(a.begin(), a.end(), b.begin(), b.end(), [](const auto& x, const auto& y) {
+        return x.joint == y.joint && x.min_weight == y.min_weight && x.max_weight == y.max_weight;
+      });
+    };
+    EXPECT_TRUE(same_ranges(split->group_influences(), one->group_influences())) << file;
+    EXPECT_TRUE(same_ranges(split->cluster_influences(), one->cluster_influences())) << file;
+    EXPECT_EQ(split->cluster_lane_offsets(), one->cluster_lane_offsets()) << file;
+    EXPECT_EQ(split->cluster_lanes(), one->cluster_lanes()) << file;
     ASSERT_EQ(split->joint_pair_moments().size(), one->joint_pair_moments().size()) << file;
     for (size_t q = 0; q < one->joint_pair_moments().size(); ++q) {
       const auto& a = split->joint_pair_moments()[q];
@@ -160,6 +177,36 @@ TEST(TaskPool, BuildsTheSameCharacterAsOneThread) {
       EXPECT_EQ(a.normal_moment, b.normal_moment) << file << " pair " << q;
     }
   }
+}
+
+// A skin of more vertices than one validation piece holds is checked in pieces, and the
+// message is still that of its first problem, as one thread finds it.
+TEST(TaskPool, ValidatesACharacterInPiecesWithTheFirstProblem) {
+  const std::filesystem::path data = MOTIONLOD_SHARED_DATA;
+  if (!std::filesystem::exists(data / "MANIFEST.md")) GTEST_SKIP() << "../shared/data is absent";
+  auto asset = io::LoadAssetFile(data / "characters/RobotExpressive.glb");
+  ASSERT_TRUE(asset.ok());
+  const core::RawCharacter& valid = (*asset)->character();
+  ASSERT_GT(valid.skin.positions.size(), 6000u);
+  TaskPool pool(2);
+  ASSERT_TRUE(core::ValidateRawCharacter(valid, pool.Runner()).ok());
+  const auto expect_message = [&](const core::RawCharacter& c, const std::string& message) {
+    const Status one = core::ValidateRawCharacter(c);
+    const Status split = core::ValidateRawCharacter(c, pool.Runner());
+    EXPECT_EQ(one.message(), message);
+    EXPECT_EQ(split.message(), message);
+    EXPECT_FALSE(core::BuildCharacter(c, pool.Runner()).ok()) << message;
+  };
+  core::RawCharacter late = valid;
+  late.skin.positions[6000].x() = NAN;
+  expect_message(late, "vertex 6000 has a non-finite position");
+  core::RawCharacter both = late;
+  both.skin.normals[100] *= 2;
+  expect_message(both, "vertex 100 has a normal that is not unit length");
+  core::RawCharacter triangle = valid;
+  triangle.skin.triangles[0][1] = 1 << 30;
+  expect_message(triangle, "triangle 0 refers to vertex 1073741824 of " +
+                               std::to_string(valid.skin.positions.size()));
 }
 
 // What a one-thread bake of `file` (in ../shared/data) works on.
