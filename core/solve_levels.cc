@@ -82,6 +82,39 @@ inline void TransposeRotationRows(const MatrixXd& from, MatrixXd& to) {
   }
 }
 
+// Row i of a panel of B^T (4 columns of kt.cols() rows each, one after the other) gains
+// M times rows 4j to 4j + 3 of kt's column i, M symmetric: K_j^T M in the right-hand sides'
+// transposed layout, read from Kt itself. Four columns at a time, each column's four rows
+// (four contiguous doubles) transposed as whole vectors; the sums are PanelProduct's, in
+// its order. Inline, so that a caller's AVX2 version (base/simd.h) runs it 256 bits wide.
+inline void AddKtProduct(double* panel, const MatrixXd& kt, int j, const Eigen::Matrix4d& m) {
+  const Eigen::Index rows = kt.cols(), stride = kt.rows();
+  const double* source = kt.data() + 4 * j;
+  double coefficient[4][4];
+  for (int c = 0; c < 4; ++c) {
+    for (int a = 0; a < 4; ++a) coefficient[c][a] = m(c, a);
+  }
+  Eigen::Index i = 0;
+  for (; i + 4 <= rows; i += 4) {
+    Lanes4 columns[4], q[4];  // q[a]: row 4j + a of the columns i to i + 3
+    for (int f = 0; f < 4; ++f) columns[f] = *AsLanes4(source + (i + f) * stride);
+    Transpose4(columns, q);
+    for (int c = 0; c < 4; ++c) {
+      Lanes4 sum = *AsLanes4(panel + c * rows + i);
+      for (int a = 0; a < 4; ++a) sum += coefficient[c][a] * q[a];
+      *AsLanes4(panel + c * rows + i) = sum;
+    }
+  }
+  for (; i < rows; ++i) {
+    const double* q = source + i * stride;
+    for (int c = 0; c < 4; ++c) {
+      double sum = panel[c * rows + i];
+      for (int a = 0; a < 4; ++a) sum += coefficient[c][a] * q[a];
+      panel[c * rows + i] = sum;
+    }
+  }
+}
+
 }  // namespace
 
 const char* VariantName(Variant variant) {
@@ -146,9 +179,9 @@ struct PreparedMotion::Impl {
   // tr(Kr^T Cn Kr) per frame.
   MatrixXd fp_root, fn_root;
   std::vector<double> const_p, const_n;
-  // The right-hand sides are assembled transposed (3T x 4m, see SolveSystem)
-  // from transposed copies: ft = (Q kt)^T and ktt = kt^T, both 3T x 4n.
-  MatrixXd ft, ktt;
+  // The right-hand sides are assembled transposed (3T x 4m, see SolveSystem), from a
+  // transposed copy of F: ft = (Q kt)^T, 3T x 4n.
+  MatrixXd ft;
   // The joint terms' forms, Ep_joint(t) = sum_j tr(Delta_j^T Jp_j Delta_j) and the same
   // for En with Jn_j: Jp_j = omega b_j [p0_j;1][p0_j;1]^T, Jn_j = omega b_j [o0_j;0][o0_j;0]^T
   // (o0_j the bind y axis).
@@ -527,12 +560,13 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
   // product of 4 contiguous columns (a sparse-dense product would update one coefficient
   // at a time); in pieces of frames (rows), each in the widest vectors this CPU has. Each
   // piece transposes its frames' columns of Kt and sums its rows of F^T in panels of its
-  // own, then copies both into Kt^T and F^T: a column of those (3T rows) rarely ends on a
-  // cache line, so two pieces share a line in every column, and summing in place had both
+  // own, then copies F^T's into place: a column of F^T (3T rows) rarely ends on a cache
+  // line, so two pieces share a line in every column, and summing in place had both
   // threads write those lines once per pair (Fox on an Intel Xeon, 2 threads: 23 to 34 us
   // for a piece beside another, 8 to 12 alone). A serial pass (the whole transpose, or
-  // zeroing F^T up front) kept the other thread waiting.
-  d.ktt.resize(3 * frames, 4 * n);
+  // zeroing F^T up front) kept the other thread waiting. (Kt^T is not kept: the solves
+  // read Kt, AddKtProduct; its copy cost the pieces more on two threads, where the lines
+  // they write were last read by the other core, than the solves' transposes.)
   d.ft.resize(3 * frames, 4 * n);
   // The sample (which needs only Kt) is one more piece, the last: on two threads it runs
   // beside the others instead of after them.
@@ -557,7 +591,6 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
                              rows, rows);
         }
       }
-      d.ktt.middleRows(first, rows) = ktt;
       d.ft.middleRows(first, rows) = ft;
     });
   });
@@ -587,30 +620,25 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::EveryNthFrame(in
   e.alpha = d.alpha;
   e.beta = d.beta;
   e.beta_fit = d.beta_fit;
-  // Each frame's columns of kt (fp_root, fn_root) and rows of ft (ktt), and its constants.
+  // Each frame's columns of kt (fp_root, fn_root) and rows of ft, and its constants.
   const int frames = 1 + (d.frames - 1) / stride;  // d.frames >= 1; no overflow
   e.frames = frames;
   const bool kept_forms = !d.const_p.empty();
   e.kt.resize(d.kt.rows(), 3 * frames);
   e.ft.resize(3 * frames, d.ft.cols());
-  e.ktt.resize(3 * frames, d.ktt.cols());
   if (kept_forms) {
     e.fp_root.resize(d.fp_root.rows(), 3 * frames);
     e.fn_root.resize(d.fn_root.rows(), 3 * frames);
   }
-  // ft and ktt a column at a time: a frame's three rows of a column are contiguous (row by
-  // row, as Eigen copies middleRows, every element is a column's stride from the last).
-  const auto copy_frame_rows = [&](const MatrixXd& from, MatrixXd& to) {
-    for (Eigen::Index col = 0; col < from.cols(); ++col) {
-      const double* source = from.col(col).data();
-      double* target = to.col(col).data();
-      for (int t = 0; t < frames; ++t) {
-        for (int r = 0; r < 3; ++r) target[3 * t + r] = source[3 * t * stride + r];
-      }
+  // ft a column at a time: a frame's three rows of a column are contiguous (row by row, as
+  // Eigen copies middleRows, every element is a column's stride from the last).
+  for (Eigen::Index col = 0; col < d.ft.cols(); ++col) {
+    const double* source = d.ft.col(col).data();
+    double* target = e.ft.col(col).data();
+    for (int t = 0; t < frames; ++t) {
+      for (int r = 0; r < 3; ++r) target[3 * t + r] = source[3 * t * stride + r];
     }
-  };
-  copy_frame_rows(d.ft, e.ft);
-  copy_frame_rows(d.ktt, e.ktt);
+  }
   for (int t = 0; t < frames; ++t) {
     const int source = t * stride;
     e.kt.middleCols<3>(3 * t) = d.kt.middleCols<3>(3 * source);
@@ -1517,9 +1545,7 @@ StatusOr<LevelSystem> SolveSystem(const PreparedMotion::Impl& d, const ReducedSk
   }
   for (int s = 0; s < m; ++s) {
     const int j = level.kept_joints[s];
-    // Row by row, Kt's row times J + lambda I, which is symmetric.
-    AddPanelProduct<4>(bt.col(4 * s).data(), d.ktt.col(4 * j).data(),
-                       d.joint_fit[j] + lambda * Eigen::Matrix4d::Identity(), cols, cols);
+    AddKtProduct(bt.col(4 * s).data(), d.kt, j, d.joint_fit[j] + lambda * Eigen::Matrix4d::Identity());
   }
 
   if (IsRigid(d.settings.variant) && d.settings.resolve_rigid_translation) {
