@@ -156,14 +156,13 @@ void PointBox(const ClusterPoint* begin, const ClusterPoint* end, Vec3d& center,
   }
 }
 
-// Splits the group of vertices cluster_vertices[begin, end) into clusters of at most
+// Splits the group of vertices base[begin, end) of cluster_vertices into clusters of at most
 // kMaxClusterVertices by median splits along the longest axis, depth first (each
 // cluster's vertices stay contiguous: the range is reordered in place), appending them and
 // the group to `out`; the group's box goes to center and half (left as they are for an
 // empty group).
-void ClusterGroup(const RawSkin& k, uint32_t* cluster_vertices, uint32_t begin, uint32_t end,
+void ClusterGroup(const RawSkin& k, uint32_t* base, uint32_t begin, uint32_t end,
                   ClusterScratch& scratch, Vec3d& center, Vec3d& half, GroupClusters& out) {
-  uint32_t* const base = cluster_vertices;
   AppendInfluences(k, base + begin, base + end, scratch, out.group_influences,
                    out.group_influence_ends);
   std::vector<ClusterPoint>& points = scratch.points;
@@ -204,8 +203,8 @@ void ClusterGroup(const RawSkin& k, uint32_t* cluster_vertices, uint32_t begin, 
 // ValidateRawCharacter checks a large skin in pieces of this many vertices.
 constexpr size_t kValidationPieceVertices = 4096;
 
-// ValidateRawCharacter's checks of the vertices [first, end) and of the triangles, for
-// a skin whose arrays have consistent lengths.
+// ValidateRawCharacter's checks of the vertices [first, end), for a skin whose arrays have
+// consistent lengths (ValidateTriangles: of its triangles).
 Status ValidateVertices(const RawSkin& k, size_t n, size_t first, size_t end) {
   for (size_t i = first; i < end; ++i) {
     if (!IsFinite(k.positions[i])) {
@@ -215,7 +214,9 @@ Status ValidateVertices(const RawSkin& k, size_t n, size_t first, size_t end) {
       return InvalidArgument("vertex " + std::to_string(i) + " has a normal that is not unit length");
     }
     const uint32_t begin = k.influence_offsets[i], stop = k.influence_offsets[i + 1];
-    if (stop < begin) return InvalidArgument("influence_offsets decrease at vertex " + std::to_string(i));
+    if (stop < begin) {
+      return InvalidArgument("influence_offsets decrease at vertex " + std::to_string(i));
+    }
     if (begin == stop) {
       return InvalidArgument("vertex " + std::to_string(i) + " has no influences (zero weights)");
     }
@@ -267,8 +268,8 @@ Status ValidateRawCharacter(const RawCharacter& raw, const PieceRunner& run) {
   const size_t n = s.parents.size();
   if (n == 0) return InvalidArgument("the skeleton has no joints");
   if (s.joint_names.size() != n || s.bind_world.size() != n) {
-    return InvalidArgument("skeleton arrays differ in length: " + std::to_string(n) +
-                           " parents, " + std::to_string(s.joint_names.size()) + " names, " +
+    return InvalidArgument("skeleton arrays differ in length: " + std::to_string(n) + " parents, " +
+                           std::to_string(s.joint_names.size()) + " names, " +
                            std::to_string(s.bind_world.size()) + " bind matrices");
   }
   if (n > 65535) return InvalidArgument("more than 65535 joints");
@@ -277,8 +278,7 @@ Status ValidateRawCharacter(const RawCharacter& raw, const PieceRunner& run) {
   for (size_t j = 0; j < n; ++j) {
     const int jj = static_cast<int>(j);
     if (j > 0 && (s.parents[j] < 0 || s.parents[j] >= jj)) {
-      return InvalidArgument(JointLabel(s, jj) +
-                             " has parent " + std::to_string(s.parents[j]) +
+      return InvalidArgument(JointLabel(s, jj) + " has parent " + std::to_string(s.parents[j]) +
                              "; joints must follow their parent and only joint 0 is a root");
     }
     if (!names.insert(s.joint_names[j]).second) {
@@ -313,7 +313,9 @@ Status ValidateRawCharacter(const RawCharacter& raw, const PieceRunner& run) {
   RunPieces(run, static_cast<int>(pieces), [&](int piece) {
     const size_t first = piece * kValidationPieceVertices;
     found[piece] = ValidateVertices(k, n, first, std::min(p, first + kValidationPieceVertices));
-    if (found[piece].ok() && static_cast<size_t>(piece) + 1 == pieces) found[piece] = ValidateTriangles(k);
+    if (found[piece].ok() && static_cast<size_t>(piece) + 1 == pieces) {
+      found[piece] = ValidateTriangles(k);
+    }
   });
   for (Status& status : found) {
     if (!status.ok()) return std::move(status);
@@ -427,7 +429,9 @@ StatusOr<std::shared_ptr<const Character>> BuildCharacter(RawCharacter raw, cons
     c->cluster_vertices_.resize(p);
     {
       std::vector<uint32_t> cursor(group_offsets.begin(), group_offsets.end() - 1);
-      for (int i = 0; i < p; ++i) c->cluster_vertices_[cursor[dominant_joint[i]]++] = static_cast<uint32_t>(i);
+      for (int i = 0; i < p; ++i) {
+        c->cluster_vertices_[cursor[dominant_joint[i]]++] = static_cast<uint32_t>(i);
+      }
     }
     // The groups in runs of consecutive joints of at least kClusterPieceVertices vertices,
     // each run a piece with lists of its own, appended to the character's in group order.
@@ -464,7 +468,8 @@ StatusOr<std::shared_ptr<const Character>> BuildCharacter(RawCharacter raw, cons
       append_ends(run_out.cluster_influence_ends, c->cluster_influence_offsets_);
       c->group_influences_.insert(c->group_influences_.end(), run_out.group_influences.begin(),
                                   run_out.group_influences.end());
-      c->cluster_influences_.insert(c->cluster_influences_.end(), run_out.cluster_influences.begin(),
+      c->cluster_influences_.insert(c->cluster_influences_.end(),
+                                    run_out.cluster_influences.begin(),
                                     run_out.cluster_influences.end());
       c->cluster_vertex_offsets_.insert(c->cluster_vertex_offsets_.end(),
                                         run_out.cluster_vertex_ends.begin(),
@@ -492,7 +497,8 @@ StatusOr<std::shared_ptr<const Character>> BuildCharacter(RawCharacter raw, cons
     RunPieces(run, static_cast<int>(lane_pieces), [&](int piece) {
       std::vector<int32_t> row_of_joint(n, -1);
       const size_t first_cluster = piece * kLanePieceClusters;
-      for (size_t q = first_cluster; q < std::min(clusters, first_cluster + kLanePieceClusters); ++q) {
+      const size_t end_cluster = std::min(clusters, first_cluster + kLanePieceClusters);
+      for (size_t q = first_cluster; q < end_cluster; ++q) {
         const uint32_t first = c->cluster_vertex_offsets_[q];
         const uint32_t count = c->cluster_vertex_offsets_[q + 1] - first;
         const uint32_t padded = Character::ClusterLaneRow(count);

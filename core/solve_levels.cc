@@ -1545,7 +1545,8 @@ StatusOr<LevelSystem> SolveSystem(const PreparedMotion::Impl& d, const ReducedSk
   }
   for (int s = 0; s < m; ++s) {
     const int j = level.kept_joints[s];
-    AddKtProduct(bt.col(4 * s).data(), d.kt, j, d.joint_fit[j] + lambda * Eigen::Matrix4d::Identity());
+    AddKtProduct(bt.col(4 * s).data(), d.kt, j,
+                 d.joint_fit[j] + lambda * Eigen::Matrix4d::Identity());
   }
 
   if (IsRigid(d.settings.variant) && d.settings.resolve_rigid_translation) {
