@@ -112,18 +112,18 @@ StatusOr<core::Motion> Asset::SampleAnimation(std::string_view name, double fps,
                            std::to_string(kMaxFrames) + " frames or " +
                            std::to_string(kMaxMatrices) + " matrices");
   }
-  core::Motion motion = SampleClip(*clip, impl_->nodes, impl_->rig.joint_nodes, fps, pool);
+  SampledClip sampled = SampleClip(*clip, impl_->nodes, impl_->rig.joint_nodes, fps, pool);
   // Corrupted transforms (a zero scale in a rest matrix, say) must not reach the caller
   // as a motion that core::ValidateMotion would reject.
-  const size_t bad = core::FirstNonInvertibleAffine(motion.joint_world);
-  if (bad < motion.joint_world.size()) {
-    const size_t n = static_cast<size_t>(motion.joint_count);
+  const size_t bad = sampled.first_non_invertible;
+  if (bad < sampled.motion.joint_world.size()) {
+    const size_t n = static_cast<size_t>(sampled.motion.joint_count);
     return InvalidArgument("animation " + Quote(clip->info.name) + " gives joint " +
                            Quote(impl_->rig.character.skeleton.joint_names[bad % n]) +
                            " a singular or non-finite matrix at frame " + std::to_string(bad / n) +
                            " (corrupted transforms?)");
   }
-  return motion;
+  return std::move(sampled.motion);
 }
 
 StatusOr<std::shared_ptr<const Asset>> LoadAsset(std::vector<SourceFile> files,

@@ -375,9 +375,10 @@ void PoseSampler::Evaluate(const Clip* clip, double seconds, core::Affine34d* jo
   for (size_t j = 0; j < joint_nodes_.size(); ++j) joint_world[j] = world_[joint_nodes_[j]];
 }
 
-core::Motion SampleClip(const Clip& clip, const std::vector<SceneNode>& nodes,
-                        const std::vector<int>& joint_nodes, double fps, TaskPool* pool) {
-  core::Motion motion;
+SampledClip SampleClip(const Clip& clip, const std::vector<SceneNode>& nodes,
+                       const std::vector<int>& joint_nodes, double fps, TaskPool* pool) {
+  SampledClip sampled;
+  core::Motion& motion = sampled.motion;
   motion.name = clip.info.name;
   motion.fps = fps;
   motion.frame_count = FrameCount(clip.info.duration_seconds, fps);
@@ -390,27 +391,36 @@ core::Motion SampleClip(const Clip& clip, const std::vector<SceneNode>& nodes,
   const int threads = pool != nullptr ? pool->threads() : 1;
   const int ranges =
       std::max(1, std::min(threads > 1 ? kRangesPerThread * threads : 1, motion.frame_count));
+  // Per range, the index in joint_world of its first rejected matrix, or joint_world.size().
+  std::vector<size_t> first_bad(ranges);
   const auto sample_range = [&](int w) {
     PoseSampler sampler(nodes, joint_nodes);
+    const int begin = static_cast<int>(static_cast<int64_t>(motion.frame_count) * w / ranges);
     const int end = static_cast<int>(static_cast<int64_t>(motion.frame_count) * (w + 1) / ranges);
     // The frames in the widest vectors this CPU has (base/simd.h): the blends, the
     // compositions and their products along the hierarchy are a short bake's largest part
     // outside the solver.
     RunWithWidestSimd([&] {
-      for (int t = static_cast<int>(static_cast<int64_t>(motion.frame_count) * w / ranges);
-           t < end; ++t) {
+      for (int t = begin; t < end; ++t) {
         const double seconds = std::min(t / fps, clip.info.duration_seconds);
         sampler.Evaluate(&clip, seconds,
                          &motion.joint_world[static_cast<size_t>(t) * joint_nodes.size()]);
       }
     });
+    const std::span<const core::Affine34d> range(
+        motion.joint_world.data() + static_cast<size_t>(begin) * joint_nodes.size(),
+        static_cast<size_t>(end - begin) * joint_nodes.size());
+    const size_t bad = core::FirstNonInvertibleAffine(range);
+    first_bad[w] = bad < range.size() ? static_cast<size_t>(begin) * joint_nodes.size() + bad
+                                      : motion.joint_world.size();
   };
   if (pool != nullptr) {
     pool->Run(ranges, sample_range);
   } else {
     sample_range(0);
   }
-  return motion;
+  sampled.first_non_invertible = *std::min_element(first_bad.begin(), first_bad.end());
+  return sampled;
 }
 
 }  // namespace motionlod::io

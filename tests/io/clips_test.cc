@@ -6,6 +6,8 @@
 #include <limits>
 #include <numbers>
 
+#include "base/parallel.h"
+
 namespace motionlod::io {
 namespace {
 
@@ -323,6 +325,43 @@ TEST(BuildClips, RaisesZeroScalesSoMatricesStayInvertible) {
   sampler.Evaluate(&clips->front(), 0, &world);
   EXPECT_GT(std::abs(world.leftCols<3>().determinant()), 0);
   EXPECT_EQ(warnings.size(), 1u);
+}
+
+// Two joints, the second animated over 40 s with a zero scale keyed at 30 s and 35 s
+// (a clip BuildClips would have raised: SampleClip checks what it samples whatever its
+// source), sampled at 1 fps: the first singular matrix is frame 30's second joint, in a
+// late range of frames on several threads.
+TEST(SampleClip, FindsTheFirstSingularMatrixInAnyRangeOfFrames) {
+  std::vector<SceneNode> nodes(2);
+  for (SceneNode& node : nodes) {
+    node.local = core::IdentityAffine();
+    DecomposeLocal(node);
+  }
+  nodes[1].parent = 0;
+  Clip clip;
+  clip.info.name = "shrink";
+  clip.info.duration_seconds = 40;
+  Track& track = clip.tracks.emplace_back();
+  track.node = 1;
+  for (int second = 0; second <= 40; ++second) {
+    track.scaling_times.push_back(second);
+    track.scalings.push_back(second == 30 || second == 35 ? Vector3d::Zero() : Vector3d::Ones());
+  }
+  const SampledClip alone = SampleClip(clip, nodes, {0, 1}, 1, nullptr);
+  ASSERT_EQ(alone.motion.frame_count, 41);
+  EXPECT_EQ(alone.first_non_invertible, 30u * 2 + 1);
+  for (int threads : {1, 2, 3}) {
+    TaskPool pool(threads);
+    const SampledClip sampled = SampleClip(clip, nodes, {0, 1}, 1, &pool);
+    EXPECT_EQ(sampled.first_non_invertible, 30u * 2 + 1) << threads << " threads";
+    for (size_t i = 0; i < alone.motion.joint_world.size(); ++i) {
+      EXPECT_TRUE(sampled.motion.joint_world[i].isApprox(alone.motion.joint_world[i], 0))
+          << "matrix " << i << ", " << threads << " threads";
+    }
+  }
+  track.scalings[30] = track.scalings[35] = Vector3d::Ones();
+  const SampledClip clean = SampleClip(clip, nodes, {0, 1}, 1, nullptr);
+  EXPECT_EQ(clean.first_non_invertible, clean.motion.joint_world.size());
 }
 
 TEST(BuildClips, IgnoresChannelsOfUnknownNodesWithAWarning) {
