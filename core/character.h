@@ -132,7 +132,7 @@ class Character {
   const std::vector<JointPairMoment>& joint_pair_moments() const { return joint_pair_moments_; }
 
  private:
-  friend StatusOr<std::shared_ptr<const Character>> BuildCharacter(RawCharacter raw,
+  friend StatusOr<std::shared_ptr<const Character>> BuildCharacter(const RawCharacter& raw,
                                                                    const PieceRunner& run);
   Character() = default;
 
@@ -161,8 +161,10 @@ class Character {
   std::vector<JointPairMoment> joint_pair_moments_;
 };
 
-// `run`: where its two independent halves run (base/pieces.h); the result is the same.
-StatusOr<std::shared_ptr<const Character>> BuildCharacter(RawCharacter raw,
+// Checks `raw` (ValidateRawCharacter's errors) and builds its Character, a copy of its
+// arrays with what the solver derives from them. `run`: where its pieces run
+// (base/pieces.h); the result is the same.
+StatusOr<std::shared_ptr<const Character>> BuildCharacter(const RawCharacter& raw,
                                                           const PieceRunner& run = {});
 
 }  // namespace motionlod::core

@@ -132,7 +132,7 @@ TEST(TaskPool, NestedAndConcurrentRunsComplete) {
   EXPECT_EQ(leaves.load(), 3 * 81);
 }
 
-// BuildCharacter's two halves on a pool give the character they give on one thread, to the
+// BuildCharacter's pieces on a pool give the character they give on one thread, to the
 // bit, on real skins.
 TEST(TaskPool, BuildsTheSameCharacterAsOneThread) {
   const std::filesystem::path data = MOTIONLOD_SHARED_DATA;
@@ -143,6 +143,14 @@ TEST(TaskPool, BuildsTheSameCharacterAsOneThread) {
     ASSERT_TRUE(asset.ok()) << file;
     const auto one = *core::BuildCharacter((*asset)->character());
     const auto split = *core::BuildCharacter((*asset)->character(), pool.Runner());
+    // The skin's arrays, copied by pieces of the validation's job.
+    const core::RawSkin& raw = (*asset)->character().skin;
+    EXPECT_EQ(split->skin().positions, raw.positions) << file;
+    EXPECT_EQ(split->skin().normals, raw.normals) << file;
+    EXPECT_EQ(split->skin().triangles, raw.triangles) << file;
+    EXPECT_EQ(split->skin().influence_offsets, raw.influence_offsets) << file;
+    EXPECT_EQ(split->skin().influence_joints, raw.influence_joints) << file;
+    EXPECT_EQ(split->skin().influence_weights, raw.influence_weights) << file;
     EXPECT_EQ(split->height(), one->height()) << file;
     EXPECT_EQ(split->vertex_areas(), one->vertex_areas()) << file;
     EXPECT_EQ(split->subtree_lengths(), one->subtree_lengths()) << file;
@@ -195,7 +203,8 @@ TEST(TaskPool, ValidatesACharacterInPiecesWithTheFirstProblem) {
     const Status split = core::ValidateRawCharacter(c, pool.Runner());
     EXPECT_EQ(one.message(), message);
     EXPECT_EQ(split.message(), message);
-    EXPECT_FALSE(core::BuildCharacter(c, pool.Runner()).ok()) << message;
+    EXPECT_EQ(core::BuildCharacter(c, pool.Runner()).status().message(), message);
+    EXPECT_EQ(core::BuildCharacter(c).status().message(), message);
   };
   core::RawCharacter late = valid;
   late.skin.positions[6000].x() = NAN;
