@@ -505,8 +505,12 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
     d.beta = max_en > 1e-20 ? 1.0 / max_en : 1.0;
   }
   d.beta_fit = FitsNormals(settings.variant) ? d.beta : 0.0;
-  // The per-frame work below runs in pieces of frames on `run`.
-  constexpr int kFramesPerPiece = 16;
+  // The per-frame work below runs in pieces of frames on `run`: 16 frames, or fewer for a
+  // clip of under 64 frames, so that it still makes four pieces (a 24-frame clip's pieces
+  // of 16 and 8 frames kept one of two threads waiting for a third of their time); always
+  // a multiple of four frames, so that the F pieces' rows fall in the same groups of four
+  // rows (their vectors) whatever the clip's length.
+  const int frames_per_piece = std::min(16, 4 * ((frames + 15) / 16));
   // The kept-space forms' products and constants (see KeptForms), frame by frame; after
   // the normalisation, whose root-only errors stay in the joint pairs' form so that alpha
   // and beta, and with them every solution, do not depend on the workload. Most of
@@ -517,10 +521,10 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
     d.fn_root = MatrixXd::Zero(4 * n, 3 * frames);
     d.const_p.assign(frames, 0.0);
     d.const_n.assign(frames, 0.0);
-    RunPieces(run, (frames + kFramesPerPiece - 1) / kFramesPerPiece, [&](int piece) {
+    RunPieces(run, (frames + frames_per_piece - 1) / frames_per_piece, [&](int piece) {
       RunWithWidestSimd([&] {
         Eigen::Matrix<double, Eigen::Dynamic, 3> shifted(4 * n, 3);
-        for (int t = piece * kFramesPerPiece; t < std::min(frames, (piece + 1) * kFramesPerPiece);
+        for (int t = piece * frames_per_piece; t < std::min(frames, (piece + 1) * frames_per_piece);
              ++t) {
           shifted = d.kt.middleCols<3>(3 * t);
           const Eigen::RowVector3d root = d.kt.block<1, 3>(3, 3 * t);
@@ -568,17 +572,20 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
   // read Kt, AddKtProduct; its copy cost the pieces more on two threads, where the lines
   // they write were last read by the other core, than the solves' transposes.)
   d.ft.resize(3 * frames, 4 * n);
-  // The sample (which needs only Kt) is one more piece, the last: on two threads it runs
-  // beside the others instead of after them.
-  const int f_pieces = (frames + kFramesPerPiece - 1) / kFramesPerPiece;
-  RunPieces(run, f_pieces + 1, [&](int piece) {
-    if (piece == f_pieces) {
+  // The sample (which needs only Kt) is one more piece, the first: on two threads it runs
+  // beside the others instead of after them, and a short clip of a large mesh has it as
+  // its longest piece (Orc@16089v's 24 frames: 55 us, an F piece 13 to 26). (Split in
+  // two, its vertices picked before the pieces, it kept Create's thread longer.)
+  const int f_pieces = (frames + frames_per_piece - 1) / frames_per_piece;
+  RunPieces(run, 1 + f_pieces, [&](int task) {
+    if (task == 0) {
       d.PrepareSample();
       return;
     }
+    const int piece = task - 1;
     RunWithWidestSimd([&] {
-      const Eigen::Index first = 3 * piece * kFramesPerPiece;
-      const Eigen::Index rows = std::min<Eigen::Index>(3 * kFramesPerPiece, d.ft.rows() - first);
+      const Eigen::Index first = 3 * piece * frames_per_piece;
+      const Eigen::Index rows = std::min<Eigen::Index>(3 * frames_per_piece, d.ft.rows() - first);
       MatrixXd ktt(rows, 4 * n);
       MatrixXd ft = MatrixXd::Zero(rows, 4 * n);
       TransposeDoubles(d.kt.data() + first * d.kt.rows(), d.kt.rows(), d.kt.rows(), rows,
