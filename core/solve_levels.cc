@@ -505,12 +505,13 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
     d.beta = max_en > 1e-20 ? 1.0 / max_en : 1.0;
   }
   d.beta_fit = FitsNormals(settings.variant) ? d.beta : 0.0;
-  // The per-frame work below runs in pieces of frames on `run`: 16 frames, or fewer for a
-  // clip of under 64 frames, so that it still makes four pieces (a 24-frame clip's pieces
-  // of 16 and 8 frames kept one of two threads waiting for a third of their time); always
-  // a multiple of four frames, so that the F pieces' rows fall in the same groups of four
-  // rows (their vectors) whatever the clip's length.
-  const int frames_per_piece = std::min(16, 4 * ((frames + 15) / 16));
+  // The per-frame work below runs in pieces of frames on `run`: at most 16 frames, and
+  // four pieces where the clip has fewer than 64 frames (a 24-frame clip's pieces of 16
+  // and 8 frames kept one of two threads waiting for a third of their time). The F
+  // pieces' are a multiple of four frames, so that their rows fall in the same groups of
+  // four rows (their vectors) whatever the clip's length.
+  const int forms_frames = std::min(16, (frames + 3) / 4);
+  const int f_frames = std::min(16, 4 * ((frames + 15) / 16));
   // The kept-space forms' products and constants (see KeptForms), frame by frame; after
   // the normalisation, whose root-only errors stay in the joint pairs' form so that alpha
   // and beta, and with them every solution, do not depend on the workload. Most of
@@ -521,10 +522,10 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
     d.fn_root = MatrixXd::Zero(4 * n, 3 * frames);
     d.const_p.assign(frames, 0.0);
     d.const_n.assign(frames, 0.0);
-    RunPieces(run, (frames + frames_per_piece - 1) / frames_per_piece, [&](int piece) {
+    RunPieces(run, (frames + forms_frames - 1) / forms_frames, [&](int piece) {
       RunWithWidestSimd([&] {
         Eigen::Matrix<double, Eigen::Dynamic, 3> shifted(4 * n, 3);
-        for (int t = piece * frames_per_piece; t < std::min(frames, (piece + 1) * frames_per_piece);
+        for (int t = piece * forms_frames; t < std::min(frames, (piece + 1) * forms_frames);
              ++t) {
           shifted = d.kt.middleCols<3>(3 * t);
           const Eigen::RowVector3d root = d.kt.block<1, 3>(3, 3 * t);
@@ -576,7 +577,7 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
   // beside the others instead of after them, and a short clip of a large mesh has it as
   // its longest piece (Orc@16089v's 24 frames: 55 us, an F piece 13 to 26). (Split in
   // two, its vertices picked before the pieces, it kept Create's thread longer.)
-  const int f_pieces = (frames + frames_per_piece - 1) / frames_per_piece;
+  const int f_pieces = (frames + f_frames - 1) / f_frames;
   RunPieces(run, 1 + f_pieces, [&](int task) {
     if (task == 0) {
       d.PrepareSample();
@@ -584,8 +585,8 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
     }
     const int piece = task - 1;
     RunWithWidestSimd([&] {
-      const Eigen::Index first = 3 * piece * frames_per_piece;
-      const Eigen::Index rows = std::min<Eigen::Index>(3 * frames_per_piece, d.ft.rows() - first);
+      const Eigen::Index first = 3 * piece * f_frames;
+      const Eigen::Index rows = std::min<Eigen::Index>(3 * f_frames, d.ft.rows() - first);
       MatrixXd ktt(rows, 4 * n);
       MatrixXd ft = MatrixXd::Zero(rows, 4 * n);
       TransposeDoubles(d.kt.data() + first * d.kt.rows(), d.kt.rows(), d.kt.rows(), rows,
