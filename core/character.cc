@@ -359,8 +359,8 @@ StatusOr<std::shared_ptr<const Character>> BuildCharacter(const RawCharacter& ra
   std::shared_ptr<Character> c(new Character());
   c->name_ = raw.name;
   c->skeleton_ = raw.skeleton;
-  // The skin's arrays are copied by pieces of the validation's job, the largest first:
-  // a 16k-vertex skin is a megabyte, and its copy ahead of the checks was a tenth of the
+  // The skin's arrays are copied by three pieces of the validation's job, first: a
+  // 16k-vertex skin is a megabyte, and its copy ahead of the checks was a tenth of the
   // build on two threads. A skin of one validation piece is copied and checked in one
   // piece (a few kilobytes). (A skin that fails the checks is dropped with the character.)
   constexpr int kCopyParts = 3;

@@ -505,11 +505,11 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
     d.beta = max_en > 1e-20 ? 1.0 / max_en : 1.0;
   }
   d.beta_fit = FitsNormals(settings.variant) ? d.beta : 0.0;
-  // The per-frame work below runs in pieces of frames on `run`: at most 16 frames, and
-  // four pieces where the clip has fewer than 64 frames (a 24-frame clip's pieces of 16
-  // and 8 frames kept one of two threads waiting for a third of their time). The F
-  // pieces' are a multiple of four frames, so that their rows fall in the same groups of
-  // four rows (their vectors) whatever the clip's length.
+  // The per-frame work below runs in pieces of frames on `run`: at most 16 frames, and a
+  // quarter of a clip of fewer than 64 frames (a 24-frame clip's pieces of 16 and 8
+  // frames kept one of two threads waiting for a third of their time). The F pieces'
+  // quarter is rounded up to a multiple of four frames, so that their rows fall in the
+  // same groups of four rows (their vectors) whatever the clip's length.
   const int forms_frames = std::min(16, (frames + 3) / 4);
   const int f_frames = std::min(16, 4 * ((frames + 15) / 16));
   // The kept-space forms' products and constants (see KeptForms), frame by frame; after
