@@ -91,15 +91,18 @@ double SkinningPassSeconds(const core::Character& character, const core::Motion&
 // each level's optimised half is a task, and so is its baseline, except that levels a joint
 // apart (every level) take their baselines one from the other in one task
 // (core::BaselineSequence). on_done(levels done so far) runs on the calling thread as
-// levels complete. `beside`, if given, is one more task, after the levels' (work of the
-// caller's that needs none of them). With `chain`, the last level's baseline is the next
-// step of *chain (a new sequence where it is empty), which then ends at that level: a
-// later call whose level keeps a subset of its joints can continue it. kNotFound
-// ("cancelled") when *cancel becomes true.
+// levels complete. `first`, if given, is one more task, the job's first (work of the
+// caller's that needs none of these levels; it may run jobs of its own on `pool`, and it
+// must not wait for a level). With `chain`, the last level's baseline is the next step of
+// *chain (a new sequence where it is empty), which then ends at that level: a later call
+// whose level keeps a subset of its joints can continue it. kNotFound ("cancelled") when
+// *cancel becomes true.
 Status SolveLevels(const std::shared_ptr<const core::PreparedMotion>& prepared,
-                   const core::JointRanking& ranking, const std::vector<int>& counts, TaskPool& pool,
-                   std::map<int, core::LevelResult>& out, const std::function<void(int)>& on_done = {},
-                   const std::atomic<bool>* cancel = nullptr, const std::function<void()>& beside = {},
+                   const core::JointRanking& ranking, const std::vector<int>& counts,
+                   TaskPool& pool, std::map<int, core::LevelResult>& out,
+                   const std::function<void(int)>& on_done = {},
+                   const std::atomic<bool>* cancel = nullptr,
+                   const std::function<void()>& first = {},
                    std::unique_ptr<core::BaselineSequence>* chain = nullptr);
 
 // The default ladder for n joints and the minimum the locks allow: n, ~3n/4, ~n/2, ~n/4,

@@ -608,6 +608,42 @@ TEST_F(RealData, TheDefaultLadderDoesNotDependOnTheThreads) {
   }
 }
 
+// The search below the ladder's smallest level starts before the larger levels are solved
+// (beside them) and counts only if none of them is over the bound. 08_02_cmu's vpno+pd
+// ladder is not monotone: with a 26% bound its 16-joint level is over and its 8-joint
+// level within, and 7 joints are within too, so a search below 8 would add a level. The
+// bracket is then empty: the smallest useful level is the ladder's 8, on any thread count.
+TEST_F(RealData, ALargerLevelOverTheBoundKeepsTheSearchAboveTheSmallestLevel) {
+  auto asset = io::LoadAssetFile(DataPath("motions/08_02_cmu.fbx"));
+  ASSERT_TRUE(asset.ok());
+  BakeRequest request = DefaultLadderRequest(*asset, core::Variant::kVPNOPD);
+  request.smallest_useful_error_pct = 26.0;
+  auto inputs = PrepareInputs(request);
+  ASSERT_TRUE(inputs.ok());
+  const int n = inputs->character->joint_count();
+  ASSERT_EQ(DefaultLadder(n, 1), (std::vector<int>{31, 23, 16, 8}));
+  const auto ranking = *core::RankJointsJob{inputs->character.get(), &inputs->motion, {}}.Run();
+  const auto prepared =
+      *core::PreparedMotion::Create(inputs->character, inputs->motion, request.settings);
+  const auto seven =
+      prepared->SolveLevel(*core::ReduceSkeletonToCount(*inputs->character, ranking, 7));
+  ASSERT_TRUE(seven.ok());
+  EXPECT_LE(seven->optimized.max_vertex_error_pct, request.smallest_useful_error_pct);
+
+  for (int threads : {1, 2}) {
+    request.threads = threads;
+    auto output = Bake(request);
+    ASSERT_TRUE(output.ok()) << output.status().ToString();
+    std::map<int, double> max_error_pct;
+    for (const nlohmann::json& level : output->report["levels"]) {
+      max_error_pct[level["joints"].get<int>()] = level["max_vertex_error_pct"].get<double>();
+    }
+    ASSERT_EQ(max_error_pct.size(), 4u) << threads << " threads: the search added a level";
+    EXPECT_GT(max_error_pct.at(16), request.smallest_useful_error_pct);
+    EXPECT_LE(max_error_pct.at(8), request.smallest_useful_error_pct);
+  }
+}
+
 TEST_F(RealData, BakeWritesALevelSetThatDecodesToTheSolvedMatrices) {
   auto asset = io::LoadAssetFile(DataPath("characters/Fox.glb"));
   ASSERT_TRUE(asset.ok());
