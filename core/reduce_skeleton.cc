@@ -15,6 +15,11 @@ StatusOr<ReducedSkeleton> ReduceSkeleton(const Character& character, std::span<c
   if (!keep[0]) return InvalidArgument("ReduceSkeleton: the root joint cannot be removed");
   const std::vector<int>& parents = character.skeleton().parents;
   ReducedSkeleton reduced;
+  // Sized up front: an every-level bake reduces n skeletons serially before its solves
+  // start (Orc@16089v's 43 on 2 threads: 30 -> 18 us with the other thread idle).
+  const auto kept = static_cast<size_t>(std::count(keep.begin(), keep.end(), true));
+  reduced.kept_joints.reserve(kept);
+  reduced.parent_slots.reserve(kept);
   reduced.joint_to_slot.assign(n, -1);
   // Topological order makes the parent's slot known before its children's.
   for (int j = 0; j < n; ++j) {

@@ -465,141 +465,145 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
     }
   });
 
-  for (const Character::JointPairMoment& moment : c.joint_pair_moments()) {
-    const double factor = moment.k == moment.l ? 1.0 : 2.0;
-    d.pairs.emplace_back(moment.k, moment.l);
-    d.pair_cp.push_back(factor * moment.position_moment);
-    Eigen::Matrix4d cn = Eigen::Matrix4d::Zero();
-    cn.topLeftCorner<3, 3>() = factor * moment.normal_moment;
-    d.pair_cn.push_back(cn);
-  }
-
-  const std::vector<double>& lengths = c.subtree_lengths();
-  const double total_length = std::accumulate(lengths.begin(), lengths.end(), 0.0);
-  d.joint_cp.resize(n);
-  d.joint_cn.resize(n);
-  for (int j = 0; j < n; ++j) {
-    const Affine34d& bind = c.skeleton().bind_world[j];
-    Eigen::Vector4d point, axis;
-    point << bind.col(3), 1.0;
-    axis << bind.col(1).normalized(), 0.0;
-    const double weight =
-        total_length > 0 ? settings.joint_weight * lengths[j] / total_length : 0.0;
-    d.joint_cp[j] = weight * point * point.transpose();
-    d.joint_cn[j] = weight * axis * axis.transpose();
-  }
-
-  // Normalisation: the largest error of the root-only, unoptimised skeleton.
-  {
-    const Impl::DeltaView root_delta{&d.kt, std::vector<int>(n, 0), &d.kt};
-    d.alpha = d.beta = 1.0;
-    LevelErrors root_only;
-    d.EvaluateErrors(root_delta, {0}, Impl::Figures::kQuadratic, root_only);
-    double max_ep = 0, max_en = 0;
-    for (int t = 0; t < frames; ++t) {
-      max_ep = std::max(max_ep, root_only.ep_vertex[t] + root_only.ep_joint[t]);
-      max_en = std::max(max_en, root_only.en_vertex[t] + root_only.en_joint[t]);
-    }
-    // A motion that never leaves the root's rigid frame has nothing to normalise by.
-    d.alpha = max_ep > 1e-20 * c.height() * c.height() ? 1.0 / max_ep : 1.0 / (c.height() * c.height());
-    d.beta = max_en > 1e-20 ? 1.0 / max_en : 1.0;
-  }
-  d.beta_fit = FitsNormals(settings.variant) ? d.beta : 0.0;
-  // The per-frame work below runs in pieces of frames on `run`: at most 16 frames, and a
-  // quarter of a clip of fewer than 64 frames (a 24-frame clip's pieces of 16 and 8
-  // frames kept one of two threads waiting for a third of their time). The F pieces'
-  // quarter is rounded up to a multiple of four frames, so that their rows fall in the
-  // same groups of four rows (their vectors) whatever the clip's length.
-  const int forms_frames = std::min(16, (frames + 3) / 4);
-  const int f_frames = std::min(16, 4 * ((frames + 15) / 16));
-  // The kept-space forms' products and constants (see KeptForms), frame by frame; after
-  // the normalisation, whose root-only errors stay in the joint pairs' form so that alpha
-  // and beta, and with them every solution, do not depend on the workload. Most of
-  // Create's time: in pieces of frames (each frame's columns are its own), each in the
-  // widest vectors this CPU has (base/simd.h).
-  if (workload == Workload::kEveryLevel) {
-    d.fp_root = MatrixXd::Zero(4 * n, 3 * frames);
-    d.fn_root = MatrixXd::Zero(4 * n, 3 * frames);
-    d.const_p.assign(frames, 0.0);
-    d.const_n.assign(frames, 0.0);
-    RunPieces(run, (frames + forms_frames - 1) / forms_frames, [&](int piece) {
-      RunWithWidestSimd([&] {
-        Eigen::Matrix<double, Eigen::Dynamic, 3> shifted(4 * n, 3);
-        for (int t = piece * forms_frames; t < std::min(frames, (piece + 1) * forms_frames);
-             ++t) {
-          shifted = d.kt.middleCols<3>(3 * t);
-          const Eigen::RowVector3d root = d.kt.block<1, 3>(3, 3 * t);
-          for (int k = 0; k < n; ++k) shifted.row(4 * k + 3) -= root;
-          auto fp = d.fp_root.middleCols<3>(3 * t);
-          auto fn = d.fn_root.middleCols<3>(3 * t);
-          for (size_t q = 0; q < d.pairs.size(); ++q) {
-            const auto [k, l] = d.pairs[q];
-            // The moments themselves: pair_cp and pair_cn have off-diagonal pairs doubled.
-            const double single = k == l ? 1.0 : 0.5;
-            const Eigen::Matrix4d cp = single * d.pair_cp[q];
-            const Eigen::Matrix3d cn = single * d.pair_cn[q].topLeftCorner<3, 3>();
-            fp.block<4, 3>(4 * k, 0).noalias() += cp * shifted.block<4, 3>(4 * l, 0);
-            fn.block<3, 3>(4 * k, 0).noalias() += cn * shifted.block<3, 3>(4 * l, 0);
-            if (k != l) {
-              fp.block<4, 3>(4 * l, 0).noalias() += cp * shifted.block<4, 3>(4 * k, 0);
-              fn.block<3, 3>(4 * l, 0).noalias() += cn * shifted.block<3, 3>(4 * k, 0);
-            }
-          }
-          for (int k = 0; k < n; ++k) {
-            d.const_p[t] +=
-                shifted.block<4, 3>(4 * k, 0).cwiseProduct(fp.block<4, 3>(4 * k, 0)).sum();
-            d.const_n[t] +=
-                shifted.block<3, 3>(4 * k, 0).cwiseProduct(fn.block<3, 3>(4 * k, 0)).sum();
-          }
-        }
-      });
-    });
-  }
-  d.pair_fit.reserve(d.pairs.size());
-  for (const Character::JointPairMoment& moment : c.joint_pair_moments()) {
-    Eigen::Matrix4d q = d.alpha * moment.position_moment;
-    q.topLeftCorner<3, 3>() += d.beta_fit * moment.normal_moment;
-    d.pair_fit.push_back(q);
-  }
-  // F^T = Kt^T Q, one pair at a time: F_k += Q_kl Kt_l and F_l += Q_kl^T Kt_k, each a
-  // product of 4 contiguous columns (a sparse-dense product would update one coefficient
-  // at a time); in pieces of frames (rows), each in the widest vectors this CPU has. Each
-  // piece transposes its frames' columns of Kt and sums its rows of F^T in panels of its
-  // own, then copies F^T's into place: a column of F^T (3T rows) rarely ends on a cache
-  // line, so two pieces share a line in every column, and summing in place had both
-  // threads write those lines once per pair (Fox on an Intel Xeon, 2 threads: 23 to 34 us
-  // for a piece beside another, 8 to 12 alone). A serial pass (the whole transpose, or
-  // zeroing F^T up front) kept the other thread waiting. (Kt^T is not kept: the solves
-  // read Kt, AddKtProduct; its copy cost the pieces more on two threads, where the lines
-  // they write were last read by the other core, than the solves' transposes.)
-  d.ft.resize(3 * frames, 4 * n);
-  // The sample (which needs only Kt) is one more piece, the first: on two threads it runs
-  // beside the others instead of after them, and a short clip of a large mesh has it as
-  // its longest piece (Orc@16089v's 24 frames: 55 us, an F piece 13 to 26). (Split in
-  // two, its vertices picked before the pieces, it kept Create's thread longer.)
-  const int f_pieces = (frames + f_frames - 1) / f_frames;
-  RunPieces(run, 1 + f_pieces, [&](int task) {
-    if (task == 0) {
+  // The sample needs only Kt: it runs beside everything after it, which is serial at
+  // first (the pairs' moments, the normalisation), so that on two threads the one that
+  // ranked the joints takes it instead of waiting for Create's first pieces, and a short
+  // clip of a large mesh has it as its longest piece (Orc@16089v's 24 frames: 55 us, an F
+  // piece 13 to 26). (Split in two, its vertices picked before the pieces, it kept
+  // Create's thread longer.)
+  RunPieces(run, 2, [&](int task) {
+    if (task == 1) {
       d.PrepareSample();
       return;
     }
-    const int piece = task - 1;
-    RunWithWidestSimd([&] {
-      const Eigen::Index first = 3 * piece * f_frames;
-      const Eigen::Index rows = std::min<Eigen::Index>(3 * f_frames, d.ft.rows() - first);
-      MatrixXd ktt(rows, 4 * n);
-      MatrixXd ft = MatrixXd::Zero(rows, 4 * n);
-      TransposeDoubles(d.kt.data() + first * d.kt.rows(), d.kt.rows(), d.kt.rows(), rows,
-                       ktt.data(), rows);
-      for (size_t q = 0; q < d.pairs.size(); ++q) {
-        const auto [k, l] = d.pairs[q];
-        AddPanelProduct<4>(ft.col(4 * k).data(), ktt.col(4 * l).data(), d.pair_fit[q], rows, rows);
-        if (k != l) {
-          AddPanelProduct<4>(ft.col(4 * l).data(), ktt.col(4 * k).data(), d.pair_fit[q].transpose(),
-                             rows, rows);
-        }
+    for (const Character::JointPairMoment& moment : c.joint_pair_moments()) {
+      const double factor = moment.k == moment.l ? 1.0 : 2.0;
+      d.pairs.emplace_back(moment.k, moment.l);
+      d.pair_cp.push_back(factor * moment.position_moment);
+      Eigen::Matrix4d cn = Eigen::Matrix4d::Zero();
+      cn.topLeftCorner<3, 3>() = factor * moment.normal_moment;
+      d.pair_cn.push_back(cn);
+    }
+
+    const std::vector<double>& lengths = c.subtree_lengths();
+    const double total_length = std::accumulate(lengths.begin(), lengths.end(), 0.0);
+    d.joint_cp.resize(n);
+    d.joint_cn.resize(n);
+    for (int j = 0; j < n; ++j) {
+      const Affine34d& bind = c.skeleton().bind_world[j];
+      Eigen::Vector4d point, axis;
+      point << bind.col(3), 1.0;
+      axis << bind.col(1).normalized(), 0.0;
+      const double weight =
+          total_length > 0 ? settings.joint_weight * lengths[j] / total_length : 0.0;
+      d.joint_cp[j] = weight * point * point.transpose();
+      d.joint_cn[j] = weight * axis * axis.transpose();
+    }
+
+    // Normalisation: the largest error of the root-only, unoptimised skeleton.
+    {
+      const Impl::DeltaView root_delta{&d.kt, std::vector<int>(n, 0), &d.kt};
+      d.alpha = d.beta = 1.0;
+      LevelErrors root_only;
+      d.EvaluateErrors(root_delta, {0}, Impl::Figures::kQuadratic, root_only);
+      double max_ep = 0, max_en = 0;
+      for (int t = 0; t < frames; ++t) {
+        max_ep = std::max(max_ep, root_only.ep_vertex[t] + root_only.ep_joint[t]);
+        max_en = std::max(max_en, root_only.en_vertex[t] + root_only.en_joint[t]);
       }
-      d.ft.middleRows(first, rows) = ft;
+      // A motion that never leaves the root's rigid frame has nothing to normalise by.
+      d.alpha =
+          max_ep > 1e-20 * c.height() * c.height() ? 1.0 / max_ep : 1.0 / (c.height() * c.height());
+      d.beta = max_en > 1e-20 ? 1.0 / max_en : 1.0;
+    }
+    d.beta_fit = FitsNormals(settings.variant) ? d.beta : 0.0;
+    // The per-frame work below runs in pieces of frames on `run`: at most 16 frames, and a
+    // quarter of a clip of fewer than 64 frames (a 24-frame clip's pieces of 16 and 8
+    // frames kept one of two threads waiting for a third of their time). The F pieces'
+    // quarter is rounded up to a multiple of four frames, so that their rows fall in the
+    // same groups of four rows (their vectors) whatever the clip's length.
+    const int forms_frames = std::min(16, (frames + 3) / 4);
+    const int f_frames = std::min(16, 4 * ((frames + 15) / 16));
+    // The kept-space forms' products and constants (see KeptForms), frame by frame; after
+    // the normalisation, whose root-only errors stay in the joint pairs' form so that alpha
+    // and beta, and with them every solution, do not depend on the workload. Most of
+    // Create's time: in pieces of frames (each frame's columns are its own), each in the
+    // widest vectors this CPU has (base/simd.h).
+    if (workload == Workload::kEveryLevel) {
+      d.fp_root = MatrixXd::Zero(4 * n, 3 * frames);
+      d.fn_root = MatrixXd::Zero(4 * n, 3 * frames);
+      d.const_p.assign(frames, 0.0);
+      d.const_n.assign(frames, 0.0);
+      RunPieces(run, (frames + forms_frames - 1) / forms_frames, [&](int piece) {
+        RunWithWidestSimd([&] {
+          Eigen::Matrix<double, Eigen::Dynamic, 3> shifted(4 * n, 3);
+          for (int t = piece * forms_frames; t < std::min(frames, (piece + 1) * forms_frames);
+               ++t) {
+            shifted = d.kt.middleCols<3>(3 * t);
+            const Eigen::RowVector3d root = d.kt.block<1, 3>(3, 3 * t);
+            for (int k = 0; k < n; ++k) shifted.row(4 * k + 3) -= root;
+            auto fp = d.fp_root.middleCols<3>(3 * t);
+            auto fn = d.fn_root.middleCols<3>(3 * t);
+            for (size_t q = 0; q < d.pairs.size(); ++q) {
+              const auto [k, l] = d.pairs[q];
+              // The moments themselves: pair_cp and pair_cn have off-diagonal pairs doubled.
+              const double single = k == l ? 1.0 : 0.5;
+              const Eigen::Matrix4d cp = single * d.pair_cp[q];
+              const Eigen::Matrix3d cn = single * d.pair_cn[q].topLeftCorner<3, 3>();
+              fp.block<4, 3>(4 * k, 0).noalias() += cp * shifted.block<4, 3>(4 * l, 0);
+              fn.block<3, 3>(4 * k, 0).noalias() += cn * shifted.block<3, 3>(4 * l, 0);
+              if (k != l) {
+                fp.block<4, 3>(4 * l, 0).noalias() += cp * shifted.block<4, 3>(4 * k, 0);
+                fn.block<3, 3>(4 * l, 0).noalias() += cn * shifted.block<3, 3>(4 * k, 0);
+              }
+            }
+            for (int k = 0; k < n; ++k) {
+              d.const_p[t] +=
+                  shifted.block<4, 3>(4 * k, 0).cwiseProduct(fp.block<4, 3>(4 * k, 0)).sum();
+              d.const_n[t] +=
+                  shifted.block<3, 3>(4 * k, 0).cwiseProduct(fn.block<3, 3>(4 * k, 0)).sum();
+            }
+          }
+        });
+      });
+    }
+    d.pair_fit.reserve(d.pairs.size());
+    for (const Character::JointPairMoment& moment : c.joint_pair_moments()) {
+      Eigen::Matrix4d q = d.alpha * moment.position_moment;
+      q.topLeftCorner<3, 3>() += d.beta_fit * moment.normal_moment;
+      d.pair_fit.push_back(q);
+    }
+    // F^T = Kt^T Q, one pair at a time: F_k += Q_kl Kt_l and F_l += Q_kl^T Kt_k, each a
+    // product of 4 contiguous columns (a sparse-dense product would update one coefficient
+    // at a time); in pieces of frames (rows), each in the widest vectors this CPU has. Each
+    // piece transposes its frames' columns of Kt and sums its rows of F^T in panels of its
+    // own, then copies F^T's into place: a column of F^T (3T rows) rarely ends on a cache
+    // line, so two pieces share a line in every column, and summing in place had both
+    // threads write those lines once per pair (Fox on an Intel Xeon, 2 threads: 23 to 34 us
+    // for a piece beside another, 8 to 12 alone). A serial pass (the whole transpose, or
+    // zeroing F^T up front) kept the other thread waiting. (Kt^T is not kept: the solves
+    // read Kt, AddKtProduct; its copy cost the pieces more on two threads, where the lines
+    // they write were last read by the other core, than the solves' transposes.)
+    d.ft.resize(3 * frames, 4 * n);
+    RunPieces(run, (frames + f_frames - 1) / f_frames, [&](int piece) {
+      RunWithWidestSimd([&] {
+        const Eigen::Index first = 3 * piece * f_frames;
+        const Eigen::Index rows = std::min<Eigen::Index>(3 * f_frames, d.ft.rows() - first);
+        MatrixXd ktt(rows, 4 * n);
+        MatrixXd ft = MatrixXd::Zero(rows, 4 * n);
+        TransposeDoubles(d.kt.data() + first * d.kt.rows(), d.kt.rows(), d.kt.rows(), rows,
+                         ktt.data(), rows);
+        for (size_t q = 0; q < d.pairs.size(); ++q) {
+          const auto [k, l] = d.pairs[q];
+          AddPanelProduct<4>(ft.col(4 * k).data(), ktt.col(4 * l).data(), d.pair_fit[q], rows,
+                             rows);
+          if (k != l) {
+            AddPanelProduct<4>(ft.col(4 * l).data(), ktt.col(4 * k).data(),
+                               d.pair_fit[q].transpose(), rows, rows);
+          }
+        }
+        d.ft.middleRows(first, rows) = ft;
+      });
     });
   });
   d.joint_fit.resize(n);
