@@ -178,21 +178,21 @@ StatusOr<std::shared_ptr<const core::PreparedMotion>> ProbeMotion(
 // fewest joints a level may keep) and hi (meets the bound): the count it ends on. Probes
 // only steer the search: they run on `probe` (ProbeMotion), and they only decide whether
 // the maximum error is within the bound (the level's own maximum on those frames:
-// EveryNthFrame solves the full motion's problem). With several threads, the probes the
-// bisection may make next run beside the one it makes now: one per thread, the bisection's
-// tree of brackets taken breadth first. It then decides from every probe made, exactly as
-// one probe at a time would (the count found does not depend on the threads), a round
-// taking as many steps as the probes made reach.
+// EveryNthFrame solves the full motion's problem). With `probes_per_round` above one, the
+// probes the bisection may make next run beside the one it makes now, the bisection's
+// tree of brackets taken breadth first: for a search with the pool to itself, one per
+// thread. It then decides from every probe made, exactly as one probe at a time would (the
+// count found depends on neither), a round taking as many steps as the probes made reach.
 StatusOr<int> SmallestUsefulCount(const core::PreparedMotion& probe, const core::JointRanking& ranking,
-                                  int lo, int hi, double bound, TaskPool& pool,
-                                  const std::atomic<bool>* cancel) {
+                                  int lo, int hi, double bound, int probes_per_round,
+                                  TaskPool& pool, const std::atomic<bool>* cancel) {
   std::map<int, bool> within_at;  // kept joints -> probe within the bound
   while (lo < hi) {
     if (Cancelled(cancel)) return CancelledStatus();
     std::vector<int> probes;
     std::vector<std::pair<int, int>> brackets = {{lo, hi}};
     for (size_t next = 0;
-         next < brackets.size() && probes.size() < static_cast<size_t>(pool.threads()); ++next) {
+         next < brackets.size() && probes.size() < static_cast<size_t>(probes_per_round); ++next) {
       const auto [low, high] = brackets[next];
       if (low >= high) continue;
       const int mid = low + (high - low) / 2;
@@ -248,6 +248,9 @@ struct LadderBottom {
 // more joints change, the more a step costs, and a sequence's evaluation runs as one piece
 // where BaselineErrors runs as two. Neither the search nor that level depend on the
 // ladder's larger levels, only on whether one of them is over the bound (Bake's check).
+// The search probes one count at a time: the other threads have those levels to solve,
+// so a probe beside it, in a bracket the bisection may never need, would mostly cost this
+// thread (Fox's 4 probes in 2 rounds of 2 became 3).
 LadderBottom SolveLadderBottom(const std::shared_ptr<const core::PreparedMotion>& prepared,
                                const core::JointRanking& ranking, int smallest, int minimum,
                                double bound, TaskPool& pool, const std::atomic<bool>* cancel) {
@@ -263,7 +266,7 @@ LadderBottom SolveLadderBottom(const std::shared_ptr<const core::PreparedMotion>
     return bottom;
   }
   bottom.search =
-      SmallestUsefulCount(***bottom.probe_motion, ranking, minimum, smallest, bound, pool, cancel);
+      SmallestUsefulCount(***bottom.probe_motion, ranking, minimum, smallest, bound, 1, pool, cancel);
   if (bottom.search->ok() && **bottom.search != smallest) {
     const int found = **bottom.search;
     if (Status status = SolveLevels(prepared, ranking, {found}, pool, bottom.levels, {}, cancel, {},
@@ -497,7 +500,7 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
     } else if (lo < hi) {
       if (!bottom.probe_motion->ok()) return bottom.probe_motion->status();
       auto found =
-          SmallestUsefulCount(***bottom.probe_motion, *ranking, lo, hi, bound, pool, cancel);
+          SmallestUsefulCount(***bottom.probe_motion, *ranking, lo, hi, bound, pool.threads(), pool, cancel);
       if (!found.ok()) return found.status();
       hi = *found;
       if (!solved.count(hi)) {
