@@ -2,6 +2,7 @@
 
 #include <Eigen/Cholesky>
 #include <algorithm>
+#include <bit>
 #include <utility>
 
 #include "base/lanes.h"
@@ -20,15 +21,19 @@ void MultiplyPanel(double* panel, const Eigen::Matrix<double, B, B>& m, Eigen::I
 }  // namespace
 
 template <int B>
-BlockSymmetric<B>::BlockSymmetric(int block_count)
-    : diagonal_(block_count, Block::Zero()), column_blocks_(block_count) {}
+BlockSymmetric<B>::BlockSymmetric(int block_count, size_t lower_capacity)
+    : diagonal_(block_count, Block::Zero()), column_first_(block_count, -1) {
+  lower_.reserve(lower_capacity);
+  next_in_column_.reserve(lower_capacity);
+}
 
 template <int B>
 typename BlockSymmetric<B>::Block& BlockSymmetric<B>::LowerAt(int row, int col) {
-  for (int index : column_blocks_[col]) {
+  for (int index = column_first_[col]; index >= 0; index = next_in_column_[index]) {
     if (lower_[index].row == row) return lower_[index].value;
   }
-  column_blocks_[col].push_back(static_cast<int>(lower_.size()));
+  next_in_column_.push_back(column_first_[col]);
+  column_first_[col] = static_cast<int>(lower_.size());
   lower_.push_back({row, col, Block::Zero()});
   return lower_.back().value;
 }
@@ -69,10 +74,40 @@ StatusOr<BlockCholesky<B>> BlockCholesky<B>::Factor(const BlockSymmetric<B>& a) 
     // block (r, s) of the factor has r < s: row r is eliminated after column s.
     BlockCholesky factor;
     factor.columns_.resize(count);
+    // The pattern first: column s holds row r < s where A has block (s, r) or the
+    // elimination of a later column s' holding both r and s fills it in. One bit per row,
+    // columns eliminated from the last, as below; each column's count of blocks gives
+    // its place in below_.
+    const size_t words = (static_cast<size_t>(count) + 63) / 64;
+    std::vector<uint64_t> rows_of(words * count, 0);
+    for (const auto& block : a.lower()) {
+      rows_of[block.row * words + block.col / 64] |= uint64_t{1} << (block.col % 64);
+    }
+    for (int s = count - 1; s >= 0; --s) {
+      const uint64_t* rows = &rows_of[s * words];
+      for (size_t w = 0; w < words; ++w) {
+        for (uint64_t bits = rows[w]; bits != 0; bits &= bits - 1) {
+          const size_t r2 = 64 * w + static_cast<size_t>(std::countr_zero(bits));
+          uint64_t* target = &rows_of[r2 * words];
+          // Rows r1 < r2 of column s.
+          for (size_t v = 0; v < r2 / 64; ++v) target[v] |= rows[v];
+          if (r2 % 64 != 0) target[r2 / 64] |= rows[r2 / 64] & ((uint64_t{1} << (r2 % 64)) - 1);
+        }
+      }
+    }
+    uint32_t blocks = 0;
+    for (int s = 0; s < count; ++s) {
+      uint32_t column_blocks = 0;
+      for (size_t w = 0; w < words; ++w) column_blocks += std::popcount(rows_of[s * words + w]);
+      factor.columns_[s].begin = factor.columns_[s].end = blocks;
+      blocks += column_blocks;
+    }
+    std::vector<std::pair<int, Block>>& below = factor.below_;
+    below.resize(blocks);
     std::vector<Block> diagonal(count);
     for (int s = 0; s < count; ++s) diagonal[s] = a.diagonal(s);
     for (const auto& block : a.lower()) {
-      factor.columns_[block.row].below.emplace_back(block.col, block.value.transpose());
+      below[factor.columns_[block.row].end++] = {block.col, block.value.transpose()};
     }
     std::vector<int> where(count, -1);
     for (int s = count - 1; s >= 0; --s) {
@@ -83,22 +118,27 @@ StatusOr<BlockCholesky<B>> BlockCholesky<B>::Factor(const BlockSymmetric<B>& a) 
         return Status(StatusCode::kInternal, "a normal matrix is not positive definite");
       }
       column.diagonal_inverse = l.template triangularView<Eigen::Lower>().solve(Block::Identity());
-      for (auto& [r, value] : column.below) value = value * column.diagonal_inverse.transpose();
+      for (uint32_t e = column.begin; e < column.end; ++e) {
+        below[e].second = below[e].second * column.diagonal_inverse.transpose();
+      }
       // The Schur complement: A(r1, r2) -= L(r1, s) L(r2, s)^T for rows r1 <= r2 (r1 is
       // eliminated after r2), the fill created where A has no such block.
-      for (const auto& [r2, l2] : column.below) {
+      for (uint32_t e2 = column.begin; e2 < column.end; ++e2) {
+        const auto& [r2, l2] = below[e2];
         diagonal[r2].noalias() -= l2 * l2.transpose();
-        auto& target = factor.columns_[r2].below;
-        for (size_t e = 0; e < target.size(); ++e) where[target[e].first] = static_cast<int>(e);
-        for (const auto& [r1, l1] : column.below) {
+        Column& target = factor.columns_[r2];
+        for (uint32_t e = target.begin; e < target.end; ++e)
+          where[below[e].first] = static_cast<int>(e);
+        for (uint32_t e1 = column.begin; e1 < column.end; ++e1) {
+          const auto& [r1, l1] = below[e1];
           if (r1 >= r2) continue;
           if (where[r1] < 0) {
-            where[r1] = static_cast<int>(target.size());
-            target.emplace_back(r1, Block::Zero());
+            where[r1] = static_cast<int>(target.end);
+            below[target.end++] = {r1, Block::Zero()};
           }
-          target[where[r1]].second.noalias() -= l1 * l2.transpose();
+          below[where[r1]].second.noalias() -= l1 * l2.transpose();
         }
-        for (const auto& entry : target) where[entry.first] = -1;
+        for (uint32_t e = target.begin; e < target.end; ++e) where[below[e].first] = -1;
       }
     }
     return factor;
@@ -125,12 +165,14 @@ Eigen::MatrixXd BlockCholesky<B>::SolveTransposed(Eigen::MatrixXd bt) const {
       };
       for (int s = count - 1; s >= 0; --s) {  // L z = y
         MultiplyPanel<B>(panel(s), columns_[s].diagonal_inverse, rows, stride);
-        for (const auto& [r, l] : columns_[s].below)
-          AddPanelProduct<B>(panel(r), panel(s), -l, rows, stride);
+        for (uint32_t e = columns_[s].begin; e < columns_[s].end; ++e) {
+          AddPanelProduct<B>(panel(below_[e].first), panel(s), -below_[e].second, rows, stride);
+        }
       }
       for (int s = 0; s < count; ++s) {  // L^T w = z
-        for (const auto& [r, l] : columns_[s].below) {
-          AddPanelProduct<B>(panel(s), panel(r), -l.transpose(), rows, stride);
+        for (uint32_t e = columns_[s].begin; e < columns_[s].end; ++e) {
+          AddPanelProduct<B>(panel(s), panel(below_[e].first), -below_[e].second.transpose(), rows,
+                             stride);
         }
         MultiplyPanel<B>(panel(s), columns_[s].diagonal_inverse.transpose(), rows, stride);
       }

@@ -10,10 +10,11 @@
 // reading each panel of right-hand sides a quarter as often.
 #pragma once
 
+#include <Eigen/Core>
+#include <cstddef>
+#include <cstdint>
 #include <utility>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "base/status.h"
 
@@ -65,7 +66,9 @@ class BlockSymmetric {
     Block value;
   };
 
-  explicit BlockSymmetric(int block_count = 0);
+  // `lower_capacity`: how many off-diagonal blocks to make room for (a bound saves the
+  // list's regrowth, the normal matrices being built once per level).
+  explicit BlockSymmetric(int block_count = 0, size_t lower_capacity = 0);
   int block_count() const { return static_cast<int>(diagonal_.size()); }
 
   // Adds v to block (s, u) and v^T to block (u, s): v + v^T where s == u.
@@ -84,7 +87,10 @@ class BlockSymmetric {
 
   std::vector<Block> diagonal_;
   std::vector<LowerBlock> lower_;
-  std::vector<std::vector<int>> column_blocks_;  // per column: indices into lower_
+  // Each column's blocks as a list through lower_: its first block's index, and each
+  // block's next in its column (-1 ends a list). Two lists in all, where a list per
+  // column was a block of its own, grown block by block.
+  std::vector<int> column_first_, next_in_column_;
 };
 
 // A = L L^T with A's blocks eliminated from the last to the first. For a skeleton's slots,
@@ -110,9 +116,14 @@ class BlockCholesky {
  private:
   struct Column {
     Block diagonal_inverse;  // L_qq^-1, lower triangular
-    std::vector<std::pair<int, Block>> below;  // (r, L_rq), r > q in elimination order
+    uint32_t begin = 0, end = 0;  // its blocks in below_
   };
   std::vector<Column> columns_;  // column q is block count - 1 - q of A
+  // Every column's (r, L_rq), r > q in elimination order: column s's in [begin, end) of
+  // its Column, in the order of A's blocks, then of the fill. Sized by a pass over the
+  // pattern alone before the numbers (one block for all, where a list per column grew
+  // with its fill).
+  std::vector<std::pair<int, Block>> below_;
 };
 
 }  // namespace motionlod::core

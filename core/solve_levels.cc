@@ -1524,7 +1524,7 @@ StatusOr<LevelSystem> SolveSystem(const PreparedMotion::Impl& d, const ReducedSk
 
   // G = P Q P^T + S J S^T + lambda I.
   BlockSymmetric<4>& g = system.g;
-  g = BlockSymmetric<4>(m);
+  g = BlockSymmetric<4>(m, d.pairs.size());  // at most a block per joint pair
   for (size_t q = 0; q < d.pairs.size(); ++q) {
     const auto [k, l] = d.pairs[q];
     if (k == l) {
@@ -1651,7 +1651,7 @@ StatusOr<VariantSolution> SolveVariant(const PreparedMotion::Impl& d, const Redu
         TransposeRotationRows(x, x_nt);
         const Eigen::Index nt_stride = x_nt.rows();
         const double* nt_data = x_nt.data();
-        BlockSymmetric<1> g_tt(m);
+        BlockSymmetric<1> g_tt(m, g.lower().size());
         // Row s of G_TN as its couplings to the slots u of its blocks (G_su(3, 0..2): the
         // diagonal block first, then the others in G's order), so that each slot's
         // right-hand sides are summed in registers, eight frames' columns at a time, and

@@ -82,6 +82,23 @@ TEST(BlockCholesky, ChunksLongRightHandSides) {
   ExpectSolvesLikeDense(MakeSystem<4>(40, couplings, 5), 2000);
 }
 
+TEST(BlockCholesky, FillsAcrossManyWordsOfItsPattern) {
+  // 150 blocks (a pattern of three 64-bit words a column): a binary tree with couplings
+  // to grandparents and a few long-range ones, whose fill crosses word boundaries (rows
+  // 63, 64, 127 and 128 among them).
+  std::vector<std::pair<int, int>> couplings;
+  for (int s = 1; s < 150; ++s) {
+    couplings.emplace_back(s, (s - 1) / 2);
+    if (s > 2) couplings.emplace_back(s, ((s - 1) / 2 - 1) / 2);
+  }
+  for (const auto& [s, u] : std::vector<std::pair<int, int>>{
+           {149, 3}, {130, 64}, {128, 63}, {127, 0}, {100, 65}, {65, 64}}) {
+    couplings.emplace_back(s, u);
+  }
+  ExpectSolvesLikeDense(MakeSystem<4>(150, couplings, 7), 9);
+  ExpectSolvesLikeDense(MakeSystem<1>(150, couplings, 8), 9);
+}
+
 TEST(BlockCholesky, RejectsAMatrixThatIsNotPositiveDefinite) {
   BlockSymmetric<4> a(2);
   a.AddDiagonal(0, Eigen::Matrix4d::Identity());
