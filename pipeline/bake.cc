@@ -183,9 +183,10 @@ StatusOr<std::shared_ptr<const core::PreparedMotion>> ProbeMotion(
 // tree of brackets taken breadth first: for a search with the pool to itself, one per
 // thread. It then decides from every probe made, exactly as one probe at a time would (the
 // count found depends on neither), a round taking as many steps as the probes made reach.
-StatusOr<int> SmallestUsefulCount(const core::PreparedMotion& probe, const core::JointRanking& ranking,
-                                  int lo, int hi, double bound, int probes_per_round,
-                                  TaskPool& pool, const std::atomic<bool>* cancel) {
+StatusOr<int> SmallestUsefulCount(const core::PreparedMotion& probe,
+                                  const core::JointRanking& ranking, int lo, int hi, double bound,
+                                  int probes_per_round, TaskPool& pool,
+                                  const std::atomic<bool>* cancel) {
   std::map<int, bool> within_at;  // kept joints -> probe within the bound
   while (lo < hi) {
     if (Cancelled(cancel)) return CancelledStatus();
@@ -265,8 +266,8 @@ LadderBottom SolveLadderBottom(const std::shared_ptr<const core::PreparedMotion>
       !bottom.probe_motion->ok()) {
     return bottom;
   }
-  bottom.search =
-      SmallestUsefulCount(***bottom.probe_motion, ranking, minimum, smallest, bound, 1, pool, cancel);
+  bottom.search = SmallestUsefulCount(***bottom.probe_motion, ranking, minimum, smallest, bound, 1,
+                                      pool, cancel);
   if (bottom.search->ok() && **bottom.search != smallest) {
     const int found = **bottom.search;
     if (Status status = SolveLevels(prepared, ranking, {found}, pool, bottom.levels, {}, cancel, {},
@@ -499,8 +500,8 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
       if (hi != smallest) solved.insert(bottom.levels.extract(hi));
     } else if (lo < hi) {
       if (!bottom.probe_motion->ok()) return bottom.probe_motion->status();
-      auto found =
-          SmallestUsefulCount(***bottom.probe_motion, *ranking, lo, hi, bound, pool.threads(), pool, cancel);
+      auto found = SmallestUsefulCount(***bottom.probe_motion, *ranking, lo, hi, bound,
+                                       pool.threads(), pool, cancel);
       if (!found.ok()) return found.status();
       hi = *found;
       if (!solved.count(hi)) {
