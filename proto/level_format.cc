@@ -421,74 +421,116 @@ Layout PlanLayout(const LevelSetRef& source, const WriterOptions& options) {
   return layout;
 }
 
-// Writes the planned file into out[0, layout.file_size), which the caller has sized, and
-// zeroed where `zeroed` (a std::string's resize already did: a second pass over a long
-// clip's megabytes is not free).
+// Where WriteLevelSet puts the file: a std::string reserved to its size, or a caller's
+// buffer. Put appends bytes, Fill a run of one byte value, data() is the file's start.
+class StringSink {
+ public:
+  explicit StringSink(std::string& out) : out_(out) {}
+  void Put(const void* bytes, size_t size) { out_.append(static_cast<const char*>(bytes), size); }
+  void Fill(size_t size, std::byte value) { out_.append(size, static_cast<char>(value)); }
+  const std::byte* data() const { return reinterpret_cast<const std::byte*>(out_.data()); }
+
+ private:
+  std::string& out_;
+};
+
+class BufferSink {
+ public:
+  explicit BufferSink(std::byte* out) : out_(out) {}
+  void Put(const void* bytes, size_t size) {
+    if (size != 0) std::memcpy(out_ + written_, bytes, size);
+    written_ += size;
+  }
+  void Fill(size_t size, std::byte value) {
+    std::fill_n(out_ + written_, size, value);
+    written_ += size;
+  }
+  const std::byte* data() const { return out_; }
+
+ private:
+  std::byte* out_;
+  size_t written_ = 0;
+};
+
+// Writes the planned file front to back into `sink`, every byte once: padding and
+// reserved fields as they go (zeros), nothing filled first (a std::string's resize
+// zero-filled what the writing then overwrote, a serial pass over a long clip's
+// megabytes). The sink ends holding layout.file_size bytes.
+template <typename Sink>
 void WriteLevelSet(const LevelSetRef& source, const WriterOptions& options, const Layout& layout,
-                   std::byte* out, bool zeroed) {
-  if (!zeroed) std::fill_n(out, layout.file_size, std::byte{0});  // padding, reserved fields
+                   Sink& sink) {
+  uint64_t written = 0;
+  const auto put = [&](const void* bytes, size_t size) {
+    sink.Put(bytes, size);
+    written += size;
+  };
+  const auto fill = [&](uint64_t size, std::byte value) {
+    sink.Fill(static_cast<size_t>(size), value);
+    written += size;
+  };
+  const auto pad_to = [&](uint64_t offset) { fill(offset - written, std::byte{0}); };
 
   // Header.
-  std::memcpy(out + internal::kOffsetMagic, internal::kMagic, sizeof internal::kMagic);
-  Store<uint16_t>(out + internal::kOffsetMajorVersion, options.major_version);
-  Store<uint16_t>(out + internal::kOffsetMinorVersion, options.minor_version);
-  Store<uint32_t>(out + internal::kOffsetHeaderSize, options.header_size);
-  Store<uint64_t>(out + internal::kOffsetFileSize, layout.file_size);
-  Store<uint32_t>(out + internal::kOffsetFlags, source.flags | options.extra_flags);
-  Store<uint32_t>(out + internal::kOffsetAlgorithmVersion, source.algorithm_version);
-  Store<uint32_t>(out + internal::kOffsetJointCount, static_cast<uint32_t>(source.parents.size()));
-  Store<uint32_t>(out + internal::kOffsetLevelCount, static_cast<uint32_t>(source.levels.size()));
-  Store<uint32_t>(out + internal::kOffsetFrameCount, source.frame_count);
-  Store<uint32_t>(out + internal::kOffsetSectionCount,
+  std::byte header[kHeaderSize] = {};
+  std::memcpy(header + internal::kOffsetMagic, internal::kMagic, sizeof internal::kMagic);
+  Store<uint16_t>(header + internal::kOffsetMajorVersion, options.major_version);
+  Store<uint16_t>(header + internal::kOffsetMinorVersion, options.minor_version);
+  Store<uint32_t>(header + internal::kOffsetHeaderSize, options.header_size);
+  Store<uint64_t>(header + internal::kOffsetFileSize, layout.file_size);
+  Store<uint32_t>(header + internal::kOffsetFlags, source.flags | options.extra_flags);
+  Store<uint32_t>(header + internal::kOffsetAlgorithmVersion, source.algorithm_version);
+  Store<uint32_t>(header + internal::kOffsetJointCount,
+                  static_cast<uint32_t>(source.parents.size()));
+  Store<uint32_t>(header + internal::kOffsetLevelCount,
+                  static_cast<uint32_t>(source.levels.size()));
+  Store<uint32_t>(header + internal::kOffsetFrameCount, source.frame_count);
+  Store<uint32_t>(header + internal::kOffsetSectionCount,
                   static_cast<uint32_t>(layout.sections.size()));
-  Store<double>(out + internal::kOffsetFps, source.fps);
-  Store<uint64_t>(out + internal::kOffsetSettingsHash, source.settings_hash);
-  std::memcpy(out + internal::kOffsetSourceHash, source.source_hash.data(),
+  Store<double>(header + internal::kOffsetFps, source.fps);
+  Store<uint64_t>(header + internal::kOffsetSettingsHash, source.settings_hash);
+  std::memcpy(header + internal::kOffsetSourceHash, source.source_hash.data(),
               source.source_hash.size());
-  Store<uint32_t>(out + internal::kOffsetLevelRecordSize, options.level_record_size);
-  std::fill(out + kHeaderSize, out + options.header_size, std::byte{options.extension_fill});
+  Store<uint32_t>(header + internal::kOffsetLevelRecordSize, options.level_record_size);
+  put(header, sizeof header);
+  fill(options.header_size - kHeaderSize, std::byte{options.extension_fill});
 
   // Directory.
-  for (size_t i = 0; i < layout.sections.size(); ++i) {
-    std::byte* entry = out + options.header_size + i * kDirectoryEntrySize;
-    Store<uint32_t>(entry + 0, layout.sections[i].kind);
-    Store<uint32_t>(entry + 4, layout.sections[i].level);
-    Store<uint64_t>(entry + 8, layout.sections[i].offset);
-    Store<uint64_t>(entry + 16, layout.sections[i].size);
+  for (const PlannedSection& planned : layout.sections) {
+    std::byte entry[kDirectoryEntrySize];
+    Store<uint32_t>(entry + 0, planned.kind);
+    Store<uint32_t>(entry + 4, planned.level);
+    Store<uint64_t>(entry + 8, planned.offset);
+    Store<uint64_t>(entry + 16, planned.size);
+    put(entry, sizeof entry);
   }
 
-  // Sections, in directory order.
+  // Sections, in directory order, each at its planned offset.
   const PlannedSection* section = layout.sections.data();
-  auto write_bytes = [&](const void* bytes, size_t size) {
-    if (size != 0) std::memcpy(out + section->offset, bytes, size);
-    ++section;
+  const auto begin_section = [&] { pad_to((section++)->offset); };
+  const auto write_bytes = [&](const void* bytes, size_t size) {
+    begin_section();
+    put(bytes, size);
   };
   write_bytes(source.variant_name.data(), source.variant_name.size());
-  {
-    std::byte* p = out + section->offset;
-    for (std::string_view name : source.joint_names) {
-      Store<uint16_t>(p, static_cast<uint16_t>(name.size()));
-      if (!name.empty()) std::memcpy(p + 2, name.data(), name.size());
-      p += 2 + name.size();
-    }
-    ++section;
+  begin_section();
+  for (std::string_view name : source.joint_names) {
+    const auto length = static_cast<uint16_t>(name.size());
+    put(&length, sizeof length);
+    put(name.data(), name.size());
   }
   write_bytes(source.parents.data(), source.parents.size_bytes());
-  {
-    std::byte* record = out + section->offset;
-    for (const LevelRef& level : source.levels) {
-      Store<uint32_t>(record + internal::kRecordOffsetKeptCount,
-                      static_cast<uint32_t>(level.kept_joints.size()));
-      const float figures[5] = {level.figures.max_vertex_error_pct,
-                                level.figures.mean_vertex_error_pct,
-                                level.figures.mean_normal_error_deg, level.figures.mean_E,
-                                level.figures.max_px_for_1px_error};
-      std::memcpy(record + internal::kRecordOffsetFigures, figures, sizeof figures);
-      std::fill(record + kLevelRecordSize, record + options.level_record_size,
-                std::byte{options.extension_fill});
-      record += options.level_record_size;
-    }
-    ++section;
+  begin_section();
+  for (const LevelRef& level : source.levels) {
+    std::byte record[kLevelRecordSize] = {};
+    Store<uint32_t>(record + internal::kRecordOffsetKeptCount,
+                    static_cast<uint32_t>(level.kept_joints.size()));
+    const float figures[5] = {level.figures.max_vertex_error_pct,
+                              level.figures.mean_vertex_error_pct,
+                              level.figures.mean_normal_error_deg, level.figures.mean_E,
+                              level.figures.max_px_for_1px_error};
+    std::memcpy(record + internal::kRecordOffsetFigures, figures, sizeof figures);
+    put(record, sizeof record);
+    fill(options.level_record_size - kLevelRecordSize, std::byte{options.extension_fill});
   }
   for (const LevelRef& level : source.levels) {
     write_bytes(level.kept_joints.data(), level.kept_joints.size_bytes());
@@ -500,10 +542,11 @@ void WriteLevelSet(const LevelSetRef& source, const WriterOptions& options, cons
   }
 
   // Trailer.
-  std::byte* trailer = out + layout.trailer_offset;
-  std::memcpy(trailer, internal::kTrailerMagic, sizeof internal::kTrailerMagic);
-  const uint64_t checksum = Xxh64(std::span<const std::byte>(out, layout.file_size - 8));
-  Store<uint64_t>(trailer + 8, checksum);
+  pad_to(layout.trailer_offset);
+  put(internal::kTrailerMagic, sizeof internal::kTrailerMagic);
+  std::byte checksum[8];
+  Store<uint64_t>(checksum, Xxh64(std::span<const std::byte>(sink.data(), layout.file_size - 8)));
+  put(checksum, sizeof checksum);
 }
 
 StatusOr<std::string> EncodeSource(const LevelSetRef& source, const WriterOptions& options) {
@@ -512,8 +555,9 @@ StatusOr<std::string> EncodeSource(const LevelSetRef& source, const WriterOption
   if (layout.file_size > out.max_size()) {
     return InvalidArgument(StrCat("the level set needs ", layout.file_size, " bytes"));
   }
-  out.resize(layout.file_size);
-  WriteLevelSet(source, options, layout, reinterpret_cast<std::byte*>(out.data()), /*zeroed=*/true);
+  out.reserve(layout.file_size);
+  StringSink sink(out);
+  WriteLevelSet(source, options, layout, sink);
   return out;
 }
 
@@ -869,7 +913,8 @@ StatusOr<size_t> EncodeLevelSetInto(const LevelSetData& data, std::span<std::byt
     return InvalidArgument(
         StrCat("the output holds ", out.size(), " bytes; the level set needs ", layout.file_size));
   }
-  WriteLevelSet(source, options, layout, out.data(), /*zeroed=*/false);
+  BufferSink sink(out.data());
+  WriteLevelSet(source, options, layout, sink);
   return static_cast<size_t>(layout.file_size);
 }
 
