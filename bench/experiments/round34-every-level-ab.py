@@ -1,5 +1,6 @@
-# Round 34 (docs/PERFORMANCE.md): two or more commands that print round34-every-level-
-# medians.cc's line, run alternately ROUNDS times; per stage, the median of their medians
+# Round 34 (docs/PERFORMANCE.md): two or more commands that print the line of
+# round33-every-level-trace.cc with round34-every-level-medians.patch, run alternately
+# ROUNDS times; per stage, the median of their medians
 # and the fastest. Each command is LABEL::COMMAND LINE, e.g.
 #   python3 bench/experiments/round34-every-level-ab.py 8 \
 #     "old::/tmp/medians_old ../shared/data/characters/Orc.gltf vpno+pd 2 16089 60" \
