@@ -104,13 +104,16 @@ LevelRef RefOf(const LevelView& level) {
 // Semantic validation, shared by the encoder (kInvalidArgument) and the decoder
 // (kDataLoss): returns the first problem, or an empty string.
 
-std::string CheckName(std::string_view what, std::string_view name, bool allow_empty) {
-  if (name.empty() && !allow_empty) return StrCat(what, " is empty");
+// What is wrong with a name, as the end of a sentence about it ("is empty"), or an empty
+// string: the caller names the name only on failure (a joint's, built for every joint of
+// every level set written or read, was most of the check of a small one).
+std::string NameProblem(std::string_view name, bool allow_empty) {
+  if (name.empty() && !allow_empty) return "is empty";
   if (name.size() > kMaxNameBytes) {
-    return StrCat(what, " is ", name.size(), " bytes long (at most ", kMaxNameBytes, ")");
+    return StrCat("is ", name.size(), " bytes long (at most ", kMaxNameBytes, ")");
   }
-  if (!IsValidUtf8(name)) return StrCat(what, " is not valid UTF-8");
-  if (name.find('\0') != std::string_view::npos) return StrCat(what, " contains a NUL byte");
+  if (!IsValidUtf8(name)) return "is not valid UTF-8";
+  if (name.find('\0') != std::string_view::npos) return "contains a NUL byte";
   return {};
 }
 
@@ -136,9 +139,8 @@ std::string CheckSkeleton(const LevelSetRef& source) {
     }
   }
   for (size_t j = 0; j < n; ++j) {
-    std::string problem = CheckName(StrCat("the name of joint ", j), source.joint_names[j],
-                                    /*allow_empty=*/false);
-    if (!problem.empty()) return problem;
+    const std::string problem = NameProblem(source.joint_names[j], /*allow_empty=*/false);
+    if (!problem.empty()) return StrCat("the name of joint ", j, " ", problem);
   }
   std::vector<std::string_view> sorted = source.joint_names;
   std::sort(sorted.begin(), sorted.end());
@@ -330,8 +332,8 @@ std::string CheckLevelSet(const LevelSetRef& source, bool allow_unknown_flags,
   if (!(std::isfinite(source.fps) && source.fps > 0)) {
     return StrCat("fps is ", source.fps, " (finite and > 0 expected)");
   }
-  std::string problem = CheckName("the variant name", source.variant_name, /*allow_empty=*/true);
-  if (!problem.empty()) return problem;
+  std::string problem = NameProblem(source.variant_name, /*allow_empty=*/true);
+  if (!problem.empty()) return StrCat("the variant name ", problem);
   problem = CheckSkeleton(source);
   if (!problem.empty()) return problem;
   if (source.levels.empty()) return "the level set has no level";
