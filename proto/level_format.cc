@@ -424,13 +424,15 @@ Layout PlanLayout(const LevelSetRef& source, const WriterOptions& options) {
 }
 
 // Where WriteLevelSet puts the file: a std::string reserved to its size, or a caller's
-// buffer. Put appends bytes, Fill a run of one byte value, data() is the file's start.
+// buffer. Put appends bytes, Fill a run of one byte value, data() is the file's start and
+// size() how much of it is written.
 class StringSink {
  public:
   explicit StringSink(std::string& out) : out_(out) {}
   void Put(const void* bytes, size_t size) { out_.append(static_cast<const char*>(bytes), size); }
   void Fill(size_t size, std::byte value) { out_.append(size, static_cast<char>(value)); }
   const std::byte* data() const { return reinterpret_cast<const std::byte*>(out_.data()); }
+  uint64_t size() const { return out_.size(); }
 
  private:
   std::string& out_;
@@ -448,6 +450,7 @@ class BufferSink {
     written_ += size;
   }
   const std::byte* data() const { return out_; }
+  uint64_t size() const { return written_; }
 
  private:
   std::byte* out_;
@@ -461,16 +464,11 @@ class BufferSink {
 template <typename Sink>
 void WriteLevelSet(const LevelSetRef& source, const WriterOptions& options, const Layout& layout,
                    Sink& sink) {
-  uint64_t written = 0;
-  const auto put = [&](const void* bytes, size_t size) {
-    sink.Put(bytes, size);
-    written += size;
-  };
+  const auto put = [&](const void* bytes, size_t size) { sink.Put(bytes, size); };
   const auto fill = [&](uint64_t size, std::byte value) {
     sink.Fill(static_cast<size_t>(size), value);
-    written += size;
   };
-  const auto pad_to = [&](uint64_t offset) { fill(offset - written, std::byte{0}); };
+  const auto pad_to = [&](uint64_t offset) { fill(offset - sink.size(), std::byte{0}); };
 
   // Header.
   std::byte header[kHeaderSize] = {};
