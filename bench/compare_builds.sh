@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Wall-clock A/B of two builds of the bake benchmark, side by side on the same machine:
 # the two programs run alternately, ROUNDS rounds of 3 repetitions each, and every bake is
-# compared as a ratio to its own build's skinning pass (docs/PERFORMANCE.md, round 4).
+# compared as a ratio to its own build's skinning pass, so that load on the shared machine
+# falls on both builds alike (docs/PERFORMANCE.md, "How to run").
 #   bash bench/compare_builds.sh BASE_BUILD NEW_BUILD [FILTER]
 # BASE_BUILD and NEW_BUILD hold bench/motionlod_bench_bake (MOTIONLOD_BUILD_BENCH=ON; e.g.
 # a `git worktree` of the base commit configured like build-bench/). FILTER is a Google

@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
-"""Joint rankings of two builds side by side (docs/PERFORMANCE.md, round 15): for every
-character and motion of ../shared/data that has a clip of its own, `motionlod rank FILE
---json --threads 1` of each build, then the largest difference of the rotational factor
-(radians) and the ranks where the removal orders differ.
+"""Joint rankings of two builds side by side, to check that a change to the ranking moves
+only the order of joints that barely move: for every character and motion of
+../shared/data that has a clip of its own, `motionlod rank FILE --json --threads 1` of each
+build, then the largest difference of the rotational factor (radians) and the ranks where
+the removal orders differ.
 
   python3 bench/compare_rankings.py BASE_BUILD NEW_BUILD
 

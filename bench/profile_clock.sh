@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
-# Where a bake's time goes by the clock: `perf record -e cpu-clock` samples (this machine
-# has no hardware counters, and callgrind's instruction counts miss stalls: cache misses,
-# failed store forwarding, long dependency chains; docs/PERFORMANCE.md, round 4) over the
-# bake benchmark cases FILTER matches, then the functions' shares of the samples.
+# Where a bake's time goes by the clock: `perf record -e cpu-clock` samples over the bake
+# benchmark cases FILTER matches, then the functions' shares of the samples. By the clock
+# because callgrind's instruction counts miss stalls (cache misses, failed store forwarding,
+# long dependency chains), and the shared machines have no hardware counters.
 #   bash bench/profile_clock.sh BUILD_DIR FILTER [TOP]
 # e.g. bash bench/profile_clock.sh build-bench 'bake/stormtrooper.dae@16647v/vpno/all'
 # BUILD_DIR holds bench/motionlod_bench_bake. The shares include the bench's own skinning
