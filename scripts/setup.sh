@@ -8,7 +8,7 @@ packages=(
   build-essential cmake ninja-build pkg-config
   libeigen3-dev libassimp-dev nlohmann-json3-dev libspdlog-dev libcli11-dev libssl-dev
   libgtest-dev libgmock-dev libbenchmark-dev
-  libcpp-httplib-dev libsqlite3-dev libtomlplusplus-dev zlib1g-dev
+  libcpp-httplib-dev libsqlite3-dev libtomlplusplus-dev zlib1g-dev libxxhash-dev
   chromium  # the web viewer's end-to-end test drives it (never a downloaded browser)
   bubblewrap libseccomp-dev  # the import worker's sandbox and its seccomp filter (server/import_sandbox.h)
   clang libclang-rt-14-dev  # libFuzzer targets (scripts/fuzz.sh)
