@@ -9,7 +9,6 @@
 #include <type_traits>
 #include <utility>
 
-#include "base/simd.h"
 #include "proto/checksum.h"
 #include "proto/level_format_internal.h"
 #include "proto/utf8.h"
@@ -223,47 +222,31 @@ std::string CheckJointMap(size_t l, std::span<const int32_t> parents,
   return {};
 }
 
-// Whether the 3x3 parts A of two stored matrices (three rows of four floats each: A's row,
-// then the translation) are both rotations: columns orthonormal to 1e-3, det A > 0. A row
-// of each is one vector of eight floats (the first matrix's in lanes 0 to 3), so that
-// A^T A = sum_i r_i^T r_i and det A = r0 . (r1 x r2) are formed lane by lane for both at
-// once (lanes 3 and 7, the translations', are left out): about a sixth of the operations
-// of the entries one at a time in double. Float is ample for the tolerance: the rounding
-// of these sums is about 1e-7.
-typedef float Floats4 __attribute__((vector_size(4 * sizeof(float))));
-typedef float Floats8 __attribute__((vector_size(8 * sizeof(float))));
-typedef int32_t Ints8 __attribute__((vector_size(8 * sizeof(int32_t))));
-typedef float UnalignedFloats4
-    __attribute__((vector_size(4 * sizeof(float)), aligned(alignof(float)), may_alias));
-
-inline bool AreRotations(const float* first, const float* second) {
+// Whether the 3x3 part A of a stored matrix (three rows of four floats each: A's row, then
+// the translation) is a rotation: columns orthonormal to 1e-3, det A > 0. Column a of A^T A
+// and the terms of det A = r0 . (r1 x r2) are formed column by column, a = 0 to 2. Float
+// is ample for the tolerance: the rounding of these sums is about 1e-7. Branch-free (an
+// AND of comparisons, NaN failing all of them): a loop over matrices has no branch to
+// mispredict.
+inline bool IsRotation(const float* k) {
   constexpr float kTolerance = 1e-3f;
-  Floats8 r[3];  // (not lambdas returning vectors: a 32-byte vector changes the ABI)
-  for (int i = 0; i < 3; ++i) {
-    r[i] = __builtin_shufflevector(*reinterpret_cast<const UnalignedFloats4*>(first + 4 * i),
-                                   *reinterpret_cast<const UnalignedFloats4*>(second + 4 * i), 0, 1,
-                                   2, 3, 4, 5, 6, 7);
+  const float* r0 = k;
+  const float* r1 = k + 4;
+  const float* r2 = k + 8;
+  bool ok = true;
+  float det = 0.0f;
+  for (int a = 0; a < 3; ++a) {
+    const int b = (a + 1) % 3;
+    const int c = (a + 2) % 3;
+    // (A^T A)(a, a) - 1 and (A^T A)(a, a + 1 mod 3).
+    const float diagonal = r0[a] * r0[a] + r1[a] * r1[a] + r2[a] * r2[a] - 1.0f;
+    const float off_diagonal = r0[a] * r0[b] + r1[a] * r1[b] + r2[a] * r2[b];
+    ok &= (diagonal <= kTolerance) & (diagonal >= -kTolerance) & (off_diagonal <= kTolerance) &
+          (off_diagonal >= -kTolerance);
+    det += r0[a] * (r1[b] * r2[c] - r1[c] * r2[b]);
   }
-  // next[i], after[i]: lane a of r[i] moved to lane a + 1 and a + 2 (mod 3) within each half,
-  // lanes 3 and 7 in place.
-  Floats8 next[3], after[3];
-  for (int i = 0; i < 3; ++i) {
-    next[i] = __builtin_shufflevector(r[i], r[i], 1, 2, 0, 3, 5, 6, 4, 7);
-    after[i] = __builtin_shufflevector(r[i], r[i], 2, 0, 1, 3, 6, 4, 5, 7);
-  }
-  // Lane a: (A^T A)(a, a) - 1 and (A^T A)(a, a + 1 mod 3).
-  const Floats8 diagonal = r[0] * r[0] + r[1] * r[1] + r[2] * r[2] - 1.0f;
-  const Floats8 off_diagonal = r[0] * next[0] + r[1] * next[1] + r[2] * next[2];
-  const Floats8 terms = r[0] * (next[1] * after[2] - after[1] * next[2]);
-  const Floats8 det = terms + __builtin_shufflevector(terms, terms, 1, 2, 0, 3, 5, 6, 4, 7) +
-                      __builtin_shufflevector(terms, terms, 2, 0, 1, 3, 6, 4, 5, 7);
-  // NaN fails every comparison.
-  const Ints8 ok = (diagonal <= kTolerance) & (diagonal >= -kTolerance) &
-                   (off_diagonal <= kTolerance) & (off_diagonal >= -kTolerance) & (det > 0.0f);
-  return (ok[0] & ok[1] & ok[2] & ok[4] & ok[5] & ok[6]) != 0;
+  return ok & (det > 0.0f);
 }
-
-inline bool IsRotation(const float* k) { return AreRotations(k, k); }
 
 std::string CheckMatrixCount(size_t l, uint32_t frame_count, size_t m,
                              std::span<const float> matrices) {
@@ -277,15 +260,11 @@ std::string CheckMatrixCount(size_t l, uint32_t frame_count, size_t m,
 // The values of a level's matrices (m per frame, a count CheckMatrixCount accepted): finite,
 // and rotations plus translations where the level set is rigid.
 std::string CheckMatrixValues(size_t l, size_t m, bool rigid, std::span<const float> matrices) {
-  // One branch-free pass, an OR of integer compares, in the widest vectors this CPU has
-  // (base/simd.h; a running AND of bools did not vectorise); locate the culprit only on
-  // failure.
-  const bool all_finite = RunWithWidestSimd([&] {
-    uint32_t non_finite = 0;
-    for (const float value : matrices) non_finite |= !IsFiniteBits(value);
-    return non_finite == 0;
-  });
-  if (!all_finite) {
+  // One branch-free pass, an OR of integer compares, which the compiler vectorises (a
+  // running AND of bools did not); the culprit is located only on failure.
+  uint32_t non_finite = 0;
+  for (const float value : matrices) non_finite |= !IsFiniteBits(value);
+  if (non_finite != 0) {
     for (size_t i = 0; i < matrices.size(); ++i) {
       if (!IsFiniteBits(matrices[i])) {
         const size_t matrix = i / kMatrixFloats;
@@ -298,17 +277,13 @@ std::string CheckMatrixValues(size_t l, size_t m, bool rigid, std::span<const fl
     // Branch-free over every matrix as above (a branch per matrix costs a rigid
     // every-level bake 3% of its time); the culprit is located only on failure.
     const size_t count = matrices.size() / kMatrixFloats;
-    const bool all_rotations = RunWithWidestSimd([&] {
-      bool all = true;
-      const float* k = matrices.data();
-      for (size_t matrix = 0; matrix + 2 <= count; matrix += 2) {
-        all &= AreRotations(k + matrix * kMatrixFloats, k + (matrix + 1) * kMatrixFloats);
-      }
-      if (count % 2 != 0) all &= IsRotation(k + (count - 1) * kMatrixFloats);
-      return all;
-    });
-    for (size_t matrix = 0; !all_rotations && matrix < count; ++matrix) {
-      if (!IsRotation(matrices.data() + matrix * kMatrixFloats)) {
+    const float* k = matrices.data();
+    uint32_t not_rotation = 0;
+    for (size_t matrix = 0; matrix < count; ++matrix) {
+      not_rotation |= !IsRotation(k + matrix * kMatrixFloats);
+    }
+    for (size_t matrix = 0; not_rotation != 0 && matrix < count; ++matrix) {
+      if (!IsRotation(k + matrix * kMatrixFloats)) {
         return StrCat("level ", l, ": K'(frame ", matrix / m, ", slot ", matrix % m,
                       ") is not a rotation plus translation, but the level set is flagged "
                       "rigid");
