@@ -9,7 +9,6 @@
 #include <utility>
 
 #include "base/parallel.h"
-#include "base/simd.h"
 #include "io/text.h"
 
 namespace motionlod::io {
@@ -397,16 +396,11 @@ SampledClip SampleClip(const Clip& clip, const std::vector<SceneNode>& nodes,
     PoseSampler sampler(nodes, joint_nodes);
     const int begin = static_cast<int>(static_cast<int64_t>(motion.frame_count) * w / ranges);
     const int end = static_cast<int>(static_cast<int64_t>(motion.frame_count) * (w + 1) / ranges);
-    // The frames in the widest vectors this CPU has (base/simd.h): the blends, the
-    // compositions and their products along the hierarchy are a short bake's largest part
-    // outside the solver.
-    RunWithWidestSimd([&] {
-      for (int t = begin; t < end; ++t) {
-        const double seconds = std::min(t / fps, clip.info.duration_seconds);
-        sampler.Evaluate(&clip, seconds,
-                         &motion.joint_world[static_cast<size_t>(t) * joint_nodes.size()]);
-      }
-    });
+    for (int t = begin; t < end; ++t) {
+      const double seconds = std::min(t / fps, clip.info.duration_seconds);
+      sampler.Evaluate(&clip, seconds,
+                       &motion.joint_world[static_cast<size_t>(t) * joint_nodes.size()]);
+    }
     const std::span<const core::Affine34d> range(
         motion.joint_world.data() + static_cast<size_t>(begin) * joint_nodes.size(),
         static_cast<size_t>(end - begin) * joint_nodes.size());

@@ -81,8 +81,8 @@ struct Scene {
 // Fills translation/rotation/scale of `node` from node.local.
 void DecomposeLocal(SceneNode& node);
 
-// T * R * S as an affine matrix. Inline: the sampler's AVX2 version (io/clips.cc) inlines
-// it with the rest of a frame's evaluation.
+// T * R * S as an affine matrix. Inline: the sampler (io/clips.cc) calls it for every
+// animated node of every frame.
 inline core::Affine34d ComposeTrs(const Eigen::Vector3d& translation,
                                   const Eigen::Quaterniond& rotation,
                                   const Eigen::Vector3d& scale) {
