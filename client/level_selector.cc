@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "base/level_selection.h"
+#include "proto/level_selection.h"
 
 namespace motionlod::client {
 
@@ -39,11 +39,12 @@ Result<LevelSelector> LevelSelector::FromBake(const proto::api::BakeInfo& bake,
 }
 
 int LevelSelector::Choose(double pixel_height, int current) const {
-  const int plain = SelectLevel(max_error_fraction_, pixel_height, settings_.budget_px);
+  const int plain = proto::SelectLevel(max_error_fraction_, pixel_height, settings_.budget_px);
   if (current < 0 || current >= level_count() || plain <= current) return plain;
   // Coarser only with the margin: the level must hold the budget at a larger height.
   const int with_margin =
-      SelectLevel(max_error_fraction_, pixel_height * (1 + settings_.hysteresis), settings_.budget_px);
+      proto::SelectLevel(max_error_fraction_, pixel_height * (1 + settings_.hysteresis),
+                         settings_.budget_px);
   return std::max(current, with_margin);
 }
 

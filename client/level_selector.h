@@ -1,5 +1,5 @@
 // Level choice on the client, per character and per frame: the on-screen height from the
-// camera (base/level_selection.h, the paper's fig. 5) against the bake's level table,
+// camera (proto/level_selection.h, the paper's fig. 5) against the bake's level table,
 // with hysteresis so that a character hovering at a threshold does not switch level
 // every frame.
 //

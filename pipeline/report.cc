@@ -5,7 +5,7 @@
 #include <numeric>
 
 #include "base/simd.h"
-#include "core/level_selection.h"
+#include "proto/level_selection.h"
 
 namespace motionlod::pipeline {
 namespace {
@@ -71,7 +71,7 @@ StatusOr<std::string> EncodeSolvedLevels(const core::Character& character,
     figures.mean_normal_error_deg = static_cast<float>(errors.mean_normal_error_deg);
     figures.mean_E = static_cast<float>(errors.mean_e);
     figures.max_px_for_1px_error =
-        static_cast<float>(core::MaxPixelHeightForBudget(errors.max_vertex_error_pct / 100.0, 1.0));
+        static_cast<float>(proto::MaxPixelHeightForBudget(errors.max_vertex_error_pct / 100.0, 1.0));
     const float* first = result.matrices.empty() ? nullptr : result.matrices.front().data();
     set.levels.push_back(
         {kept, map, figures,
@@ -141,7 +141,7 @@ json BuildReport(const ReportInputs& in) {
     for (int j = 0; j < in.character.joint_count(); ++j) {
       if (!kept[j]) removed.push_back(in.character.skeleton().joint_names[j]);
     }
-    const double max_px = core::MaxPixelHeightForBudget(r.optimized.max_vertex_error_pct / 100.0, 1.0);
+    const double max_px = proto::MaxPixelHeightForBudget(r.optimized.max_vertex_error_pct / 100.0, 1.0);
     json level = {{"joints", count},
                   {"removed", removed},
                   {"mean_E", r.optimized.mean_e},

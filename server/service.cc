@@ -10,7 +10,7 @@
 #include <thread>
 
 #include "core/character.h"
-#include "core/level_selection.h"
+#include "proto/level_selection.h"
 #include "core/solve_levels.h"
 #include "io/retarget.h"
 #include "io/sha256.h"
@@ -980,7 +980,7 @@ StatusOr<std::shared_ptr<const Service::LevelTable>> Service::GetLevelTable(
     const json& level = report["levels"][l];
     const double pct = level.value("max_vertex_error_pct", 0.0);
     table->max_error_fraction.push_back(pct / 100.0);
-    limits[l] = core::MaxPixelHeightForBudget(pct / 100.0, 1.0);
+    limits[l] = proto::MaxPixelHeightForBudget(pct / 100.0, 1.0);
     api::LevelEntry entry;
     entry.index = static_cast<int>(l);
     entry.joints = (*levels)[l].joints;
@@ -1122,7 +1122,7 @@ Result<api::LevelChoice> Service::ChooseLevel(const std::string& bake_id, double
     if (!loaded.ok()) return Internal(loaded.status());
     table = *loaded;
   }
-  const int l = core::SelectLevel(table->max_error_fraction, px, budget_px);
+  const int l = proto::SelectLevel(table->max_error_fraction, px, budget_px);
   const api::LevelEntry& entry = table->entries[static_cast<size_t>(l)];
   api::LevelChoice choice;
   choice.bake = bake_id;

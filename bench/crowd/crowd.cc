@@ -1,7 +1,7 @@
 // The crowd runtime benchmark (the paper's fig. 8 and 9, on the CPU): N characters on a
 // ground plane in front of a fixed camera, spread uniformly over the area of a 60 degree
 // wedge from 2 m to 100 m (fig. 9's layout: many far, few near). Each frame every
-// character gets its on-screen height from the camera (base/level_selection.h, fig. 5),
+// character gets its on-screen height from the camera (proto/level_selection.h, fig. 5),
 // picks its level with the client's LevelSelector (1 px budget, 10% hysteresis) and is
 // skinned on the CPU by the client's skinner (client/skinner.h); beside it the same crowd
 // with every character at full detail (level 0 of the default ladder: every joint, the
@@ -48,12 +48,12 @@
 
 #include <nlohmann/json.hpp>
 
-#include "base/level_selection.h"
 #include "client/level_selector.h"
 #include "client/skinner.h"
 #include "io/asset.h"
 #include "pipeline/bake.h"
 #include "proto/level_format.h"
+#include "proto/level_selection.h"
 
 namespace motionlod::bench {
 namespace {
@@ -194,7 +194,7 @@ double ThreadCpuSeconds() {
 }
 
 double PixelHeightAt(double distance_m) {
-  return PixelHeight({kFovY, distance_m, kCharacterSizeM, kScreenHeightPx});
+  return proto::PixelHeight({kFovY, distance_m, kCharacterSizeM, kScreenHeightPx});
 }
 
 struct Phases {  // CPU seconds

@@ -7,7 +7,7 @@
 #include <fstream>
 #include <numbers>
 
-#include "base/level_selection.h"
+#include "proto/level_selection.h"
 #include "client/level_selector.h"
 #include "tests/client/fixture.h"
 
@@ -186,7 +186,7 @@ TEST_F(ClientFlow, HysteresisStopsFlickerOnACameraSweepWithinTheBudget) {
     // table), log-spaced; jitter alternating every frame.
     const double u = f < kFrames / 2 ? f / (kFrames / 2.0) : 2.0 - f / (kFrames / 2.0);
     const double distance = std::exp(u * std::log(1000.0)) * (f % 2 == 0 ? 1.03 : 0.97);
-    const double px = PixelHeight({std::numbers::pi / 3, distance, 1.8, 1080});
+    const double px = proto::PixelHeight({std::numbers::pi / 3, distance, 1.8, 1080});
     ASSERT_GT(px, 0);
     const int s = steady->Choose(px, steady_level);
     const int p = plain->Choose(px, plain_level);

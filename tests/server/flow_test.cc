@@ -9,7 +9,7 @@
 #include <cstdio>
 #include <set>
 
-#include "core/level_selection.h"
+#include "proto/level_selection.h"
 #include "io/asset.h"
 #include "pipeline/bake.h"
 #include "proto/api.h"
@@ -136,14 +136,14 @@ TEST(DaemonFlow, UploadBakeWatchAndFetchLevelsMatchTheEngineInProcess) {
   for (const json& level : bake["levels"])
     fractions.push_back(level["max_vertex_error_pct"].get<double>() / 100);
 
-  // Levels for several on-screen heights: the redirect names the level core::SelectLevel
+  // Levels for several on-screen heights: the redirect names the level proto::SelectLevel
   // picks, inside that level's pixel range; the JSON form says the same.
   for (double px : {5.0, 15.0, 50.0, 120.0, 1000.0, 1e5}) {
     const std::string path = "/v1/bakes/" + id + "/level?px=" + std::to_string(px);
     auto redirect = client->Get(path.c_str());
     ASSERT_TRUE(redirect);
     ASSERT_EQ(redirect->status, 302) << redirect->body;
-    const int l = core::SelectLevel(fractions, px, 1.0);
+    const int l = proto::SelectLevel(fractions, px, 1.0);
     const json& level = bake["levels"][l];
     EXPECT_EQ(redirect->get_header_value("Location"), level["url"]) << "px " << px;
     EXPECT_TRUE(level["chosen"].get<bool>());

@@ -1,10 +1,10 @@
-#include "base/level_selection.h"
+#include "proto/level_selection.h"
 
 #include <cmath>
 #include <limits>
 #include <numbers>
 
-namespace motionlod {
+namespace motionlod::proto {
 
 double PixelHeight(const CameraView& view) {
   const bool valid = view.fov_y_radians > 0 && view.fov_y_radians < std::numbers::pi &&
@@ -30,4 +30,4 @@ int SelectLevel(std::span<const double> max_vertex_error_fraction, double pixel_
   return chosen;
 }
 
-}  // namespace motionlod
+}  // namespace motionlod::proto

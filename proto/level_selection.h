@@ -1,5 +1,6 @@
-// Step 6 (sec. 5, fig. 5): which level to draw a character with. Pure arithmetic shared by
-// the core, the server and the thin client (which must not depend on the core).
+// Step 6 (sec. 5, fig. 5): which level to draw a character with. Pure arithmetic on the
+// level table's figures, in proto so that the server, the bake's report and the thin client
+// (which must not depend on the core or Eigen) use the same formulas.
 //   x = theta / fov * H,  theta = atan(s / d)
 // s: character size (length), d: camera distance (same length unit), fov: vertical
 // field of view (radians), H: screen height (pixels), x: character height (pixels).
@@ -9,7 +10,7 @@
 
 #include <span>
 
-namespace motionlod {
+namespace motionlod::proto {
 
 struct CameraView {
   double fov_y_radians = 0.0;      // vertical field of view, (0, pi)
@@ -31,4 +32,4 @@ double MaxPixelHeightForBudget(double max_vertex_error_fraction, double budget_p
 int SelectLevel(std::span<const double> max_vertex_error_fraction, double pixel_height,
                 double budget_px);
 
-}  // namespace motionlod
+}  // namespace motionlod::proto
