@@ -54,7 +54,6 @@
 #include <string_view>
 #include <vector>
 
-#include "base/allocator.h"
 #include "base/parallel.h"
 #include "base/simd.h"
 #include "bench/subdivide.h"
@@ -66,6 +65,7 @@
 #include "core/solve_levels.h"
 #include "io/asset.h"
 #include "io/retarget.h"
+#include "pipeline/allocator.h"
 #include "pipeline/bake.h"
 #include "pipeline/report.h"
 #include "proto/level_format.h"
@@ -786,8 +786,8 @@ int Main(int argc, char** argv) {
 }  // namespace
 }  // namespace motionlod::bench
 
-// Bakes run with the allocator settings of the programs that bake (base/allocator.h).
+// Bakes run with the allocator settings of the programs that bake (pipeline/allocator.h).
 int main(int argc, char** argv) {
-  motionlod::KeepFreedBlocksForReuse();
+  motionlod::pipeline::KeepFreedBlocksForReuse();
   return motionlod::bench::Main(argc, argv);
 }

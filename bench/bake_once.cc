@@ -16,13 +16,13 @@
 #define CALLGRIND_STOP_INSTRUMENTATION
 #endif
 
-#include "base/allocator.h"
 #include "io/asset.h"
+#include "pipeline/allocator.h"
 #include "pipeline/bake.h"
 
 int main(int argc, char** argv) {
   using namespace motionlod;
-  KeepFreedBlocksForReuse();
+  pipeline::KeepFreedBlocksForReuse();
   const bool skin = argc == 4 && std::strcmp(argv[3], "skin") == 0;
   const bool all_levels = argc == 4 && std::strcmp(argv[3], "all") == 0;
   if (argc < 3 || argc > 4 || (argc == 4 && !skin && !all_levels)) {

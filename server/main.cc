@@ -18,8 +18,8 @@
 #include <sstream>
 #include <thread>
 
-#include "base/allocator.h"
 #include "base/simd.h"
+#include "pipeline/allocator.h"
 #include "server/config.h"
 #include "server/http_server.h"
 #include "server/routes.h"
@@ -225,6 +225,6 @@ int Main(int argc, char** argv) {
 }  // namespace motionlod::server
 
 int main(int argc, char** argv) {
-  motionlod::KeepFreedBlocksForReuse();
+  motionlod::pipeline::KeepFreedBlocksForReuse();
   return motionlod::server::Main(argc, argv);
 }

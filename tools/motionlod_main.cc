@@ -19,11 +19,11 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
-#include "base/allocator.h"
 #include "base/simd.h"
 #include "core/solve_levels.h"
 #include "io/asset.h"
 #include "io/sha256.h"
+#include "pipeline/allocator.h"
 #include "pipeline/bake.h"
 #include "pipeline/export.h"
 #include "pipeline/report.h"
@@ -347,6 +347,6 @@ int Main(int argc, char** argv) {
 }  // namespace motionlod::tools
 
 int main(int argc, char** argv) {
-  motionlod::KeepFreedBlocksForReuse();
+  motionlod::pipeline::KeepFreedBlocksForReuse();
   return motionlod::tools::Main(argc, argv);
 }

@@ -1,4 +1,4 @@
-#include "base/allocator.h"
+#include "pipeline/allocator.h"
 
 #include <cstdlib>  // defines __GLIBC__ on glibc
 
@@ -6,7 +6,7 @@
 #include <malloc.h>
 #endif
 
-namespace motionlod {
+namespace motionlod::pipeline {
 
 void KeepFreedBlocksForReuse() {
 #if defined(__GLIBC__)
@@ -19,4 +19,4 @@ void KeepFreedBlocksForReuse() {
 #endif
 }
 
-}  // namespace motionlod
+}  // namespace motionlod::pipeline
