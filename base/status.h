@@ -15,6 +15,7 @@ enum class StatusCode {
   kNotFound,            // a named thing (joint, animation, file) does not exist
   kUnsupported,         // well-formed input that this build cannot handle
   kDataLoss,            // truncated or corrupted bytes
+  kCancelled,           // the caller asked the work to stop
   kInternal,            // a bug: an invariant of ours did not hold
 };
 

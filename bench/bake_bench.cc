@@ -20,7 +20,7 @@
 //                                          path step by step); counter insitu_ratio: each
 //                                          bake over a skinning pass run right after it
 //   naive/<case>, level/<case>, ls/<case>  one mid level (round(n/2) joints, vpno+pd settings,
-//                                          1 thread): core::SolveFrameNaive on a few evenly
+//                                          1 thread): core::SolveFrameReference on a few evenly
 //                                          spaced frames, scaled by T / frames to the whole
 //                                          motion, beside PreparedMotion::SolveLevel (solve,
 //                                          polar projection, errors) and SolveLeastSquares
@@ -55,13 +55,14 @@
 #include <vector>
 
 #include "base/parallel.h"
-#include "base/simd.h"
 #include "bench/subdivide.h"
 #include "core/character.h"
 #include "core/motion.h"
 #include "core/rank_joints.h"
+#include "core/baseline_sequence.h"
 #include "core/reduce_skeleton.h"
-#include "core/reference_solver.h"
+#include "core/reference/solve_frame_reference.h"
+#include "core/simd.h"
 #include "core/solve_levels.h"
 #include "io/asset.h"
 #include "io/retarget.h"
@@ -75,6 +76,14 @@ namespace {
 
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
+
+// The machine version the bench runs (core/simd.h), from MOTIONLOD_SIMD as the programs
+// read it ("auto" when unset or unknown: Main reports an unknown value).
+core::SimdChoice Simd() {
+  const char* setting = std::getenv("MOTIONLOD_SIMD");
+  const auto choice = core::ParseSimdChoice(setting != nullptr ? setting : "");
+  return choice.ok() ? *choice : core::SimdChoice::kWidest;
+}
 
 double SecondsSince(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
@@ -122,6 +131,7 @@ struct Case {
 
 pipeline::BakeRequest RequestOf(const Case& c, core::Variant variant, int threads) {
   pipeline::BakeRequest request;
+  request.simd = Simd();
   request.character = c.character;
   request.motion = c.motion;
   request.animation = c.animation;
@@ -265,12 +275,10 @@ StatusOr<Stages> BakeEveryLevel(const core::RawCharacter& raw, const io::Asset& 
   std::optional<StatusOr<std::shared_ptr<const core::PreparedMotion>>> created;
   pool.Run(2, [&](int task) {
     if (task == 0) {
-      ranked = core::RankJointsJob{character->get(), &*motion, {}}.Run(pool.Runner());
+      ranked = core::RankJointsJob{character->get(), &*motion, {}, Simd()}.Run(pool.Runner());
       stages.rank = SecondsSince(begin);
     } else {
-      created =
-          core::PreparedMotion::Create(*character, *motion, settings,
-                                       core::PreparedMotion::Workload::kEveryLevel, pool.Runner());
+      created = core::PreparedMotion::Create(*character, *motion, settings, Simd(), pool.Runner());
     }
   });
   auto ranking = *std::move(ranked);
@@ -283,14 +291,12 @@ StatusOr<Stages> BakeEveryLevel(const core::RawCharacter& raw, const io::Asset& 
   const int n = (*character)->joint_count();
   std::vector<int> counts;
   for (int count = n; count >= ranking->locked_count; --count) counts.push_back(count);
-  std::map<int, core::LevelResult> results;
-  if (Status status = pipeline::SolveLevels(*prepared, *ranking, counts, pool, results); !status.ok()) {
-    return status;
-  }
+  auto results = pipeline::SolveLevelsJob{*prepared, &*ranking, counts}.Run(pool);
+  if (!results.ok()) return results.status();
   stages.solve = SecondsSince(begin);
 
   begin = Clock::now();
-  auto encoded = pipeline::EncodeSolvedLevels(**character, *motion, settings, {}, counts, results,
+  auto encoded = pipeline::EncodeSolvedLevels(**character, *motion, settings, {}, counts, *results,
                                               pool.Runner());
   if (!encoded.ok()) return encoded.status();
   benchmark::DoNotOptimize(encoded->data());
@@ -361,7 +367,7 @@ void BM_Naive(benchmark::State& state, const Case* c, int naive_frames) {
     const auto begin = Clock::now();
     for (int q = 0; q < used; ++q) {
       const int t = used == 1 ? 0 : static_cast<int>(std::lround(double(q) * (frames - 1) / (used - 1)));
-      auto solution = core::SolveFrameNaive(*mid->prepared, mid->level, t);
+      auto solution = core::SolveFrameReference(*mid->prepared, mid->level, t);
       benchmark::DoNotOptimize(solution.data());
     }
     // Scaled to the whole motion: every frame costs the same (same system size).
@@ -634,13 +640,11 @@ void PrintBreakdown(const std::string& label, const Case& c,
     core::SolveSettings settings;
     settings.variant = fit;
     std::shared_ptr<const core::PreparedMotion> prepared_fit, prepared_rigid;
-    const auto workload = every_level ? core::PreparedMotion::Workload::kEveryLevel
-                                      : core::PreparedMotion::Workload::kSomeLevels;
     const double prepare = MedianSeconds(runs, [&] {
-      prepared_fit = *core::PreparedMotion::Create(built, motion, settings, workload);
+      prepared_fit = *core::PreparedMotion::Create(built, motion, settings, Simd());
     });
     settings.variant = rigid;
-    prepared_rigid = *core::PreparedMotion::Create(built, motion, settings, workload);
+    prepared_rigid = *core::PreparedMotion::Create(built, motion, settings, Simd());
     double ls = 0, level_fit = 0, level_rigid = 0;
     std::string per_level;
     std::vector<core::ReducedSkeleton> levels;
@@ -678,6 +682,12 @@ void PrintBreakdown(const std::string& label, const Case& c,
 }
 
 int Main(int argc, char** argv) {
+  if (const char* setting = std::getenv("MOTIONLOD_SIMD"); setting != nullptr) {
+    if (auto choice = core::ParseSimdChoice(setting); !choice.ok()) {
+      std::fprintf(stderr, "MOTIONLOD_SIMD is %s\n", choice.status().message().c_str());
+      return 2;
+    }
+  }
   Options options;
   std::vector<char*> rest = {argv[0]};
   for (int a = 1; a < argc; ++a) {
@@ -777,7 +787,7 @@ int Main(int argc, char** argv) {
   benchmark::Initialize(&rest_argc, rest.data());
   if (benchmark::ReportUnrecognizedArguments(rest_argc, rest.data())) return 2;
   benchmark::AddCustomContext("data_dir", options.data_dir);
-  benchmark::AddCustomContext("simd", std::string(SimdVersionName()));
+  benchmark::AddCustomContext("simd", core::SimdVersionName(Simd()));
   benchmark::RunSpecifiedBenchmarks();
   benchmark::Shutdown();
   return 0;

@@ -1,12 +1,12 @@
-#include "core/block_cholesky.h"
+#include "core/internal/block_cholesky.h"
 
 #include <Eigen/Cholesky>
 #include <algorithm>
 #include <bit>
 #include <utility>
 
-#include "base/lanes.h"
-#include "base/simd.h"
+#include "core/internal/lanes.h"
+#include "core/internal/simd_dispatch.h"
 
 namespace motionlod::core {
 
@@ -67,12 +67,13 @@ double BlockSymmetric<B>::Trace() const {
 }
 
 template <int B>
-StatusOr<BlockCholesky<B>> BlockCholesky<B>::Factor(const BlockSymmetric<B>& a) {
-  return RunWithWidestSimd([&]() -> StatusOr<BlockCholesky<B>> {
+StatusOr<BlockCholesky<B>> BlockCholesky<B>::Factor(const BlockSymmetric<B>& a, SimdChoice simd) {
+  return RunWithSimd(simd, [&]() -> StatusOr<BlockCholesky<B>> {
     const int count = a.block_count();
     // Columns are indexed by A's blocks and eliminated from the last to the first, so a
     // block (r, s) of the factor has r < s: row r is eliminated after column s.
     BlockCholesky factor;
+    factor.simd_ = simd;
     factor.columns_.resize(count);
     // The pattern first: column s holds row r < s where A has block (s, r) or the
     // elimination of a later column s' holding both r and s fills it in. One bit per row,
@@ -147,7 +148,7 @@ StatusOr<BlockCholesky<B>> BlockCholesky<B>::Factor(const BlockSymmetric<B>& a) 
 
 template <int B>
 Eigen::MatrixXd BlockCholesky<B>::SolveTransposed(Eigen::MatrixXd bt) const {
-  return RunWithWidestSimd([&]() -> Eigen::MatrixXd {
+  return RunWithSimd(simd_, [&]() -> Eigen::MatrixXd {
     const int count = static_cast<int>(columns_.size());
     const Eigen::Index dim = static_cast<Eigen::Index>(B) * count;
     const Eigen::Index cols = bt.rows();

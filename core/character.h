@@ -16,6 +16,10 @@
 
 namespace motionlod::core {
 
+namespace internal {
+struct SkinClusters;  // core/internal/skin_clusters.h
+}  // namespace internal
+
 using ::motionlod::Status;
 using ::motionlod::StatusOr;
 
@@ -68,53 +72,8 @@ class Character {
   // Longest side of the bind-pose bounding box of the mesh (length): the "height"
   // that percentages of vertex error refer to.
   double height() const { return height_; }
-  // Axis-aligned bounding box (bind pose) of the vertices weighted to joint j, as center
-  // and half extents; the joint's bind position and zero extents when none are.
-  const std::vector<Vec3d>& joint_vertex_centers() const { return joint_vertex_centers_; }
-  const std::vector<Vec3d>& joint_vertex_half_extents() const { return joint_vertex_half_extents_; }
-
-  // Every vertex in exactly one cluster, for bounding how far per-joint matrix errors
-  // can move the skin without visiting it. Vertices are grouped by their dominant joint
-  // (largest weight, the first listed on ties); each group is split into spatially compact
-  // clusters of at most kMaxClusterVertices by median splits along the longest axis.
-  // Group j's clusters are [group_cluster_offsets[j], group_cluster_offsets[j+1]);
-  // cluster c's vertices are cluster_vertices[cluster_vertex_offsets[c] ..
-  // cluster_vertex_offsets[c+1]).
-  static constexpr int kMaxClusterVertices = 32;
-  const std::vector<uint32_t>& group_cluster_offsets() const { return group_cluster_offsets_; }
-  // Bounding box of each group (center, half extents; zero for an empty group).
-  const std::vector<Vec3d>& group_centers() const { return group_centers_; }
-  const std::vector<Vec3d>& group_half_extents() const { return group_half_extents_; }
-  const std::vector<uint32_t>& cluster_vertex_offsets() const { return cluster_vertex_offsets_; }
-  const std::vector<uint32_t>& cluster_vertices() const { return cluster_vertices_; }
-  const std::vector<Vec3d>& cluster_centers() const { return cluster_centers_; }
-  const std::vector<Vec3d>& cluster_half_extents() const { return cluster_half_extents_; }
-  // The joints that weight any vertex of a group or cluster, each with the range of the
-  // weights it gives them (CSR): the smallest (0 where some vertex has no weight from it)
-  // and the largest. A vertex moves by at most sum_g w_g |Delta_g [v;1]|, so these ranges
-  // (with the weights' sum of 1) bound a whole cluster's error from per-joint bounds.
-  struct InfluenceRange {
-    int32_t joint = 0;
-    float min_weight = 0;
-    float max_weight = 0;
-  };
-  const std::vector<uint32_t>& group_influence_offsets() const { return group_influence_offsets_; }
-  const std::vector<InfluenceRange>& group_influences() const { return group_influences_; }
-  const std::vector<uint32_t>& cluster_influence_offsets() const { return cluster_influence_offsets_; }
-  const std::vector<InfluenceRange>& cluster_influences() const { return cluster_influences_; }
-  // Each cluster's skin again, laid out to blend kClusterLanes vertices at once: cluster
-  // c's block starts at cluster_lane_offsets()[c] in cluster_lanes() and has rows of P
-  // floats, P its vertex count rounded up to a multiple of kClusterLanes: the bind
-  // positions' x, y and z, then the weight its cluster_influences()' joints give each
-  // vertex, in that order (0 where one gives none). Vertices in cluster_vertices() order;
-  // the padding sits at the origin with no weight.
-  static constexpr int kClusterLanes = 8;
-  // P for a cluster of `count` vertices.
-  static constexpr uint32_t ClusterLaneRow(uint32_t count) {
-    return (count + kClusterLanes - 1) / kClusterLanes * kClusterLanes;
-  }
-  const std::vector<uint32_t>& cluster_lane_offsets() const { return cluster_lane_offsets_; }
-  const std::vector<float>& cluster_lanes() const { return cluster_lanes_; }
+  // The skin indexed for the maximum vertex error search (core/internal/skin_clusters.h).
+  const internal::SkinClusters& clusters() const { return *clusters_; }
   // Direct children of each joint.
   const std::vector<std::vector<int>>& children() const { return children_; }
   int FindJoint(const std::string& name) const;  // -1 when absent
@@ -142,21 +101,7 @@ class Character {
   std::vector<double> vertex_areas_;
   std::vector<double> subtree_lengths_;
   double height_ = 0;
-  std::vector<Vec3d> joint_vertex_centers_;
-  std::vector<Vec3d> joint_vertex_half_extents_;
-  std::vector<uint32_t> group_cluster_offsets_;
-  std::vector<Vec3d> group_centers_;
-  std::vector<Vec3d> group_half_extents_;
-  std::vector<uint32_t> cluster_vertex_offsets_;
-  std::vector<uint32_t> cluster_vertices_;
-  std::vector<Vec3d> cluster_centers_;
-  std::vector<Vec3d> cluster_half_extents_;
-  std::vector<uint32_t> group_influence_offsets_;
-  std::vector<InfluenceRange> group_influences_;
-  std::vector<uint32_t> cluster_influence_offsets_;
-  std::vector<InfluenceRange> cluster_influences_;
-  std::vector<uint32_t> cluster_lane_offsets_;
-  std::vector<float> cluster_lanes_;
+  std::shared_ptr<const internal::SkinClusters> clusters_;
   std::vector<std::vector<int>> children_;
   std::vector<JointPairMoment> joint_pair_moments_;
 };

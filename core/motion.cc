@@ -3,8 +3,7 @@
 #include <cmath>
 #include <string>
 
-#include "base/lanes.h"
-#include "base/simd.h"
+#include "core/internal/lanes.h"
 #include "core/character.h"
 
 namespace motionlod::core {
@@ -44,7 +43,7 @@ inline int FirstNonInvertibleOfFour(const double* m) {
 
 size_t FirstNonInvertibleAffine(std::span<const Affine34d> matrices) {
   static_assert(sizeof(Affine34d) == 12 * sizeof(double));
-  return RunWithWidestSimd([&]() -> size_t {
+  {
     const size_t count = matrices.size();
     const size_t whole = count - count % 4;
     for (size_t first = 0; first < whole; first += 4) {
@@ -59,7 +58,7 @@ size_t FirstNonInvertibleAffine(std::span<const Affine34d> matrices) {
     }
     const int bad = FirstNonInvertibleOfFour(last[0].data());
     return bad < 4 ? whole + bad : count;
-  });
+  }
 }
 
 bool IsInvertibleAffine(const Affine34d& matrix) {

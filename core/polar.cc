@@ -4,20 +4,12 @@
 #include <cmath>
 
 #include <Eigen/LU>
-#include <Eigen/SVD>
 
-#include "base/lanes.h"
-#include "base/simd.h"
+#include "core/internal/lanes.h"
+#include "core/internal/simd_dispatch.h"
+#include "core/reference/polar_reference.h"
 
 namespace motionlod::core {
-
-Eigen::Matrix3d NearestRotationSvd(const Eigen::Matrix3d& a) {
-  const Eigen::JacobiSVD<Eigen::Matrix3d> svd(a, Eigen::ComputeFullU | Eigen::ComputeFullV);
-  Eigen::Matrix3d u = svd.matrixU();
-  const Eigen::Matrix3d& v = svd.matrixV();
-  if ((u * v.transpose()).determinant() < 0) u.col(2) = -u.col(2);
-  return u * v.transpose();
-}
 
 namespace {
 
@@ -61,8 +53,9 @@ inline int NewtonSchulzSteps(double error_squared) {
 
 }  // namespace
 
-void NearestRotations(std::span<double* const> blocks, std::ptrdiff_t column_stride) {
-  RunWithWidestSimd([&] {
+void NearestRotations(std::span<double* const> blocks, std::ptrdiff_t column_stride,
+                      SimdChoice simd) {
+  RunWithSimd(simd, [&] {
     const Eigen::Matrix3d identity = Eigen::Matrix3d::Identity();
     for (size_t first = 0; first < blocks.size(); first += kLanes) {
       const int lanes = static_cast<int>(std::min<size_t>(kLanes, blocks.size() - first));
@@ -181,7 +174,7 @@ void NearestRotations(std::span<double* const> blocks, std::ptrdiff_t column_str
         for (int c = 0; c < 3; ++c) {
           for (int r = 0; r < 3; ++r) m(r, c) = block[r + c * column_stride];
         }
-        m = norm_squared[l] > 0 ? NearestRotationSvd(m) : identity;
+        m = norm_squared[l] > 0 ? NearestRotationReference(m) : identity;
         for (int q = 0; q < 9; ++q) x[q][l] = m(q);
       }
       for (int half = 0; half < lanes; half += 4) {

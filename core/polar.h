@@ -7,13 +7,15 @@
 
 #include <Eigen/Core>
 
+#include "core/simd.h"
+
 namespace motionlod::core {
 
 // For well-conditioned A with det(A) > 0: scaled Newton steps (Higham 1986) while far from
 // orthonormal, then inverse-free Newton-Schulz steps; both converge quadratically, and a
-// near-rotation needs two or three 3x3 products. SVD with a reflection guard otherwise
-// (det(A) <= 0 or nearly singular A). Returns the identity for A = 0. One matrix through
-// NearestRotations.
+// near-rotation needs two or three 3x3 products. The SVD of the reference otherwise
+// (core/reference/polar_reference.h: det(A) <= 0 or nearly singular A). Returns the
+// identity for A = 0. One matrix through NearestRotations.
 Eigen::Matrix3d NearestRotation(const Eigen::Matrix3d& a);
 
 // NearestRotation of many 3x3 blocks where they lie, several at a time: the steps of eight
@@ -25,9 +27,8 @@ Eigen::Matrix3d NearestRotation(const Eigen::Matrix3d& a);
 // columns are read and written whole: row 3 is put back as it was. A matrix's result does
 // not depend on its batch beyond rounding: a batch steps until all of its matrices have
 // converged, and a converged matrix's further steps are the identity's.
-void NearestRotations(std::span<double* const> blocks, std::ptrdiff_t column_stride);
-
-// The SVD path alone: R = U diag(1, 1, det(U V^T)) V^T. The reference for tests.
-Eigen::Matrix3d NearestRotationSvd(const Eigen::Matrix3d& a);
+// `simd`: the machine version of its steps (core/simd.h).
+void NearestRotations(std::span<double* const> blocks, std::ptrdiff_t column_stride,
+                      SimdChoice simd = SimdChoice::kWidest);
 
 }  // namespace motionlod::core

@@ -7,9 +7,9 @@
 
 #include <Eigen/Core>
 
-#include "base/lanes.h"
-#include "base/simd.h"
-#include "core/chord_angle.h"
+#include "core/internal/lanes.h"
+#include "core/internal/simd_dispatch.h"
+#include "core/internal/chord_angle.h"
 
 namespace motionlod::core {
 namespace {
@@ -134,11 +134,11 @@ StatusOr<JointRanking> RankJointsJob::Run(const PieceRunner& run) const {
   ranking.priority.assign(n, 0.0);
 
   // Rotation angles are those between unit quaternions doubled, from their chords
-  // (core/chord_angle.h): 2 * 2 asin(|q - m| / 2), with m's sign the one nearer to q. The
+  // (core/internal/chord_angle.h): 2 * 2 asin(|q - m| / 2), with m's sign the one nearer to q. The
   // frames' loops run in the widest vectors this CPU has, a few joints per piece.
   constexpr int kJointsPerPiece = 4;
   RunPieces(run, (n + kJointsPerPiece - 1) / kJointsPerPiece, [&](int piece) {
-    RunWithWidestSimd([&] {
+    RunWithSimd(simd, [&] {
       std::vector<double> local(static_cast<size_t>(kLocalRows) * frames);
       std::vector<double> scratch(24 * static_cast<size_t>(frames));
       std::vector<double> to_mean(frames), to_bind(frames), moved(frames);

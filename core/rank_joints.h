@@ -21,6 +21,7 @@
 #include "base/status.h"
 #include "core/character.h"
 #include "core/motion.h"
+#include "core/simd.h"
 
 namespace motionlod::core {
 
@@ -38,6 +39,7 @@ struct RankJointsJob {
   const Character* character = nullptr;
   const Motion* motion = nullptr;
   std::span<const std::string> locked_joints;  // names; never removed
+  SimdChoice simd = SimdChoice::kWidest;       // the hot loops' machine version (core/simd.h)
 
   Status Validate() const;  // unknown locked names are an error naming them
   // `run`: where the joints' rotational factors are measured, a few joints per piece

@@ -23,7 +23,7 @@ Status SkinningJob::Validate() const {
   return Status::Ok();
 }
 
-// Not in an AVX2 version (base/simd.h): on this loop that version was 3% to 4% slower, and
+// Not in an AVX2 version (core/internal/simd_dispatch.h): on this loop that version was 3% to 4% slower, and
 // the bake benchmark's reference skinning pass must be the faster one.
 Status SkinningJob::Run() const {
   if (Status status = Validate(); !status.ok()) return status;

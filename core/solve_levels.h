@@ -39,12 +39,19 @@
 // Errors of any candidate (optimised, rotation-projected, unoptimised baseline) come from
 // Delta_k(t) = K'_phi(k)(t) - K_k(t): sum_i a_i |v_i - v'_i|^2 = sum_kl tr(Delta_k Cp_kl Delta_l^T),
 // again without skinning.
+//
+// Where each step lives (a newcomer reads the reference first):
+//   prepare_motion.cc     Kt, the pairs' moments, alpha and beta, F          (Create)
+//   normal_equations.cc   G, B, the block Cholesky factor, X    reference/solve_frame_reference.h
+//   rigid_projection.cc   polar projection, translation re-solve  reference/polar_reference.h
+//   level_errors.cc       E and its parts, RMS, sampled figures   reference/level_errors_reference.h
+//   max_vertex_error.cc   the exact maximum by bounded search     reference/level_errors_reference.h
+//   baseline_sequence.h   baselines of nested levels            BaselineErrors level by level
+//   smallest_level.h      the smallest useful level (bisection)
 #pragma once
 
 #include <cstdint>
 #include <memory>
-#include <span>
-#include <string>
 #include <string_view>
 #include <vector>
 
@@ -53,9 +60,14 @@
 #include "core/character.h"
 #include "core/motion.h"
 #include "core/reduce_skeleton.h"
+#include "core/simd.h"
 #include "core/types.h"
 
 namespace motionlod::core {
+
+namespace internal {
+struct PreparedData;  // core/internal/prepared_data.h
+}  // namespace internal
 
 // The paper's variants: fitted rows (positions, or positions and normals) and whether
 // each K' is projected on its rotation by polar decomposition (eq. 8).
@@ -115,26 +127,15 @@ struct LevelResult {
 // immutable, thread-safe to solve levels from concurrently.
 class PreparedMotion {
  public:
-  // What the prepared motion will serve. kEveryLevel also prepares the quadratic error
-  // forms in the kept joints' space (about one and a half levels' error evaluations more
-  // in Create), after which a level's forms cost its kept joints instead of every joint
-  // pair: a gain once many levels keep few joints (8% of an every-level bake of
-  // stormtrooper), a loss for a ladder of four or five. Results agree to rounding.
-  enum class Workload { kSomeLevels, kEveryLevel };
-  // Create's per-frame work runs in pieces on `run` (base/pieces.h); the result does not
-  // depend on the runner.
+  // `simd`: which machine version of the hot loops runs (core/simd.h). Create's per-frame
+  // work runs in pieces on `run` (base/pieces.h); the result does not depend on the runner.
   static StatusOr<std::shared_ptr<const PreparedMotion>> Create(
       std::shared_ptr<const Character> character, const Motion& motion,
-      const SolveSettings& settings, Workload workload = Workload::kSomeLevels,
+      const SolveSettings& settings, SimdChoice simd = SimdChoice::kWidest,
       const PieceRunner& run = {});
+  // Made by Create (and the core's own steps) only: the data is the core's.
+  explicit PreparedMotion(std::unique_ptr<const internal::PreparedData> data);
   ~PreparedMotion();
-
-  // The same prepared motion on frames 0, stride, 2 stride, ... (stride >= 1): alpha and
-  // beta stay this motion's, and the normal matrix does not depend on the frames, so a
-  // level solved on it has this motion's solution on those frames, to rounding. Costs a
-  // copy of those frames' columns and a new sample (of the fewer frames), not a Create:
-  // what a search over levels probes on a long motion.
-  StatusOr<std::shared_ptr<const PreparedMotion>> EveryNthFrame(int stride) const;
 
   const Character& character() const;
   const SolveSettings& settings() const;
@@ -154,43 +155,15 @@ class PreparedMotion {
   StatusOr<LevelResult> SolveOptimized(const ReducedSkeleton& level, const PieceRunner& run = {}) const;
   StatusOr<LevelErrors> BaselineErrors(const ReducedSkeleton& level, const PieceRunner& run = {}) const;
 
-  // Whether the level's optimised maximum vertex error (LevelErrors::max_vertex_error_pct)
-  // is at most bound_pct > 0: what a search over levels needs, decided without finding the
-  // maximum. The search stops at the first vertex past the bound, and refines no vertex
-  // bound within it, so it costs a fraction of SolveLevel.
-  StatusOr<bool> MaxVertexErrorWithin(const ReducedSkeleton& level, double bound_pct) const;
-
   // The unconstrained least-squares solution in double precision, before any polar
   // projection: 4m x 3T, block (4s, 3t) = K'_s(t)^T. What SolveLevel starts from.
   StatusOr<Eigen::MatrixXd> SolveLeastSquares(const ReducedSkeleton& level) const;
 
-  struct Impl;
+  // The core's steps read the prepared data (core/internal/prepared_data.h).
+  const internal::PreparedData& data() const { return *data_; }
 
  private:
-  friend class BaselineSequence;
-  explicit PreparedMotion(std::unique_ptr<Impl> impl);
-  std::unique_ptr<Impl> impl_;
-};
-
-// The baseline figures (PreparedMotion::BaselineErrors) of nested levels, each level from
-// the one before. Going to a level that keeps a subset of the last one's joints changes
-// Delta_k only for the joints whose nearest kept joint changes; only the joint pairs,
-// sampled vertices and clusters of vertices that they weight are evaluated again, and the
-// maximum search starts from the last maximum when the vertex that attained it is not
-// among them. The baselines of every level (n, n-1, ..., 1 joints) then cost about two
-// levels' instead of n. The figures are BaselineErrors' to rounding: the quadratic forms
-// are summed over joint pairs (BaselineErrors may sum them in the kept joints' space), the
-// maximum is the same (of equal maxima, another vertex may be named). Not thread-safe.
-class BaselineSequence {
- public:
-  explicit BaselineSequence(std::shared_ptr<const PreparedMotion> prepared);
-  ~BaselineSequence();
-  // `level` keeps a subset of the joints of the level before it (any level, first).
-  StatusOr<LevelErrors> Next(const ReducedSkeleton& level);
-
- private:
-  struct State;
-  std::unique_ptr<State> state_;
+  std::unique_ptr<const internal::PreparedData> data_;
 };
 
 }  // namespace motionlod::core

@@ -9,7 +9,9 @@
 #include <mutex>
 #include <optional>
 
+#include "core/baseline_sequence.h"
 #include "core/reduce_skeleton.h"
+#include "core/smallest_level.h"
 #include "core/skinning.h"
 #include "io/retarget.h"
 #include "base/parallel.h"
@@ -29,7 +31,7 @@ bool Cancelled(const std::atomic<bool>* cancel) {
   return cancel != nullptr && cancel->load(std::memory_order_relaxed);
 }
 
-Status CancelledStatus() { return Status(StatusCode::kNotFound, "the bake was cancelled"); }
+Status CancelledStatus() { return Status(StatusCode::kCancelled, "the bake was cancelled"); }
 
 }  // namespace
 
@@ -54,52 +56,47 @@ Status BakeRequest::Validate() const {
   return Status::Ok();
 }
 
-Status SolveLevels(const std::shared_ptr<const core::PreparedMotion>& prepared,
-                   const core::JointRanking& ranking, const std::vector<int>& counts,
-                   TaskPool& pool, std::map<int, core::LevelResult>& out,
-                   const std::function<void(int)>& on_done, const std::atomic<bool>* cancel,
-                   const std::function<void()>& first,
-                   std::unique_ptr<core::BaselineSequence>* chain) {
+Status SolveLevelsJob::Validate() const {
+  if (!prepared || ranking == nullptr) return InvalidArgument("SolveLevelsJob: no prepared motion or ranking");
+  const int n = prepared->character().joint_count();
+  for (size_t index = 0; index < counts.size(); ++index) {
+    if (counts[index] < ranking->locked_count || counts[index] > n ||
+        (index > 0 && counts[index] >= counts[index - 1])) {
+      return InvalidArgument("SolveLevelsJob: the counts must decrease within [" +
+                             std::to_string(ranking->locked_count) + ", " + std::to_string(n) + "]");
+    }
+  }
+  return Status::Ok();
+}
+
+StatusOr<std::map<int, core::LevelResult>> SolveLevelsJob::Run(TaskPool& pool) const {
+  if (Status status = Validate(); !status.ok()) return status;
   const size_t count = counts.size();
   std::vector<core::ReducedSkeleton> levels;
   levels.reserve(count);
   for (int kept : counts) {
-    auto level = core::ReduceSkeletonToCount(prepared->character(), ranking, kept);
+    auto level = core::ReduceSkeletonToCount(prepared->character(), *ranking, kept);
     if (!level.ok()) return level.status();
     levels.push_back(*std::move(level));
   }
   std::vector<std::optional<core::LevelResult>> results(count);
   std::vector<std::optional<core::LevelErrors>> baselines(count);
   // Levels a joint apart (every level) take their baselines one from the other, in one
-  // task, the first (the longest); task i + 1 solves level i. A ladder's far apart levels
-  // change most joints at each step: each baseline is a task of its own, task 2i solving
-  // level i and task 2i + 1 its baseline, the order that balances best over threads.
+  // task, the first (the longest); task i + 1 solves level i. Far apart levels change most
+  // joints at each step: each baseline is a task of its own, task 2i solving level i and
+  // task 2i + 1 its baseline.
   bool consecutive = count > 1;
   for (size_t index = 1; index < count; ++index) {
     consecutive = consecutive && counts[index] == counts[index - 1] - 1;
   }
-  const size_t level_tasks = consecutive ? count + 1 : 2 * count;
-  const int first_tasks = first ? 1 : 0;
-  std::vector<Status> errors(level_tasks);
+  const size_t tasks = consecutive ? count + 1 : 2 * count;
+  std::vector<Status> errors(tasks);
   std::vector<std::atomic<int>> halves_done(count);
-  // The sequence that baselines taken one from another continue: *chain, or this call's
-  // own; made at its first step (one task takes every step of a call).
-  std::unique_ptr<core::BaselineSequence> own_sequence;
-  std::unique_ptr<core::BaselineSequence>& sequence = chain != nullptr ? *chain : own_sequence;
-  const auto next_in_sequence = [&](size_t index) {
-    if (!sequence) sequence = std::make_unique<core::BaselineSequence>(prepared);
-    return sequence->Next(levels[index]);
-  };
   size_t reported = 0;
   pool.Run(
-      static_cast<int>(level_tasks) + first_tasks,
-      [&](int job_task) {
+      static_cast<int>(tasks),
+      [&](int task) {
         if (Cancelled(cancel)) return;
-        if (job_task < first_tasks) {
-          first();
-          return;
-        }
-        const int task = job_task - first_tasks;
         const auto set_baseline = [&](size_t index, StatusOr<core::LevelErrors> baseline) {
           if (!baseline.ok()) {
             errors[task] = baseline.status();
@@ -110,18 +107,15 @@ Status SolveLevels(const std::shared_ptr<const core::PreparedMotion>& prepared,
           return true;
         };
         if (consecutive && task == 0) {
+          core::BaselineSequence sequence(prepared);
           for (size_t index = 0; index < count && !Cancelled(cancel); ++index) {
-            if (!set_baseline(index, next_in_sequence(index))) return;
+            if (!set_baseline(index, sequence.Next(levels[index]))) return;
           }
           return;
         }
         if (!consecutive && task % 2 == 1) {
           const size_t index = task / 2;
-          if (chain != nullptr && index + 1 == count) {
-            set_baseline(index, next_in_sequence(index));
-          } else {
-            set_baseline(index, prepared->BaselineErrors(levels[index], pool.Runner()));
-          }
+          set_baseline(index, prepared->BaselineErrors(levels[index], pool.Runner()));
           return;
         }
         const size_t index = consecutive ? task - 1 : task / 2;
@@ -144,11 +138,12 @@ Status SolveLevels(const std::shared_ptr<const core::PreparedMotion>& prepared,
   for (const Status& error : errors) {
     if (!error.ok()) return error;
   }
+  std::map<int, core::LevelResult> out;
   for (size_t index = 0; index < count; ++index) {
     results[index]->baseline = *std::move(baselines[index]);
     out.emplace(counts[index], *std::move(results[index]));
   }
-  return Status::Ok();
+  return out;
 }
 
 std::vector<int> DefaultLadder(int joint_count, int minimum) {
@@ -163,121 +158,6 @@ std::vector<int> DefaultLadder(int joint_count, int minimum) {
 }
 
 namespace {
-
-// The prepared motion the probes of Bake's search for the smallest useful level run on:
-// on a long motion, at most kProbeFrames evenly strided frames of `prepared`.
-StatusOr<std::shared_ptr<const core::PreparedMotion>> ProbeMotion(
-    const std::shared_ptr<const core::PreparedMotion>& prepared) {
-  constexpr int kProbeFrames = 64;
-  const int stride = (prepared->frame_count() + kProbeFrames - 1) / kProbeFrames;
-  if (stride == 1) return prepared;
-  return prepared->EveryNthFrame(stride);
-}
-
-// The bisection of Bake's search for the smallest useful level between lo (fails, or the
-// fewest joints a level may keep) and hi (meets the bound): the count it ends on. Probes
-// only steer the search: they run on `probe` (ProbeMotion), and they only decide whether
-// the maximum error is within the bound (the level's own maximum on those frames:
-// EveryNthFrame solves the full motion's problem). With `probes_per_round` above one, the
-// probes the bisection may make next run beside the one it makes now, the bisection's
-// tree of brackets taken breadth first: for a search with the pool to itself, one per
-// thread. It then decides from every probe made, exactly as one probe at a time would (the
-// count found depends on neither), a round taking as many steps as the probes made reach.
-StatusOr<int> SmallestUsefulCount(const core::PreparedMotion& probe,
-                                  const core::JointRanking& ranking, int lo, int hi, double bound,
-                                  int probes_per_round, TaskPool& pool,
-                                  const std::atomic<bool>* cancel) {
-  std::map<int, bool> within_at;  // kept joints -> probe within the bound
-  while (lo < hi) {
-    if (Cancelled(cancel)) return CancelledStatus();
-    std::vector<int> probes;
-    std::vector<std::pair<int, int>> brackets = {{lo, hi}};
-    for (size_t next = 0;
-         next < brackets.size() && probes.size() < static_cast<size_t>(probes_per_round); ++next) {
-      const auto [low, high] = brackets[next];
-      if (low >= high) continue;
-      const int mid = low + (high - low) / 2;
-      if (!within_at.count(mid)) probes.push_back(mid);
-      brackets.emplace_back(low, mid);       // mid within the bound
-      brackets.emplace_back(mid + 1, high);  // mid not within it
-    }
-    std::vector<StatusOr<bool>> within(probes.size(), StatusOr<bool>(false));
-    pool.Run(static_cast<int>(probes.size()), [&](int index) {
-      auto level = core::ReduceSkeletonToCount(probe.character(), ranking, probes[index]);
-      if (!level.ok()) {
-        within[index] = level.status();
-        return;
-      }
-      within[index] = probe.MaxVertexErrorWithin(*level, bound);
-    });
-    for (size_t index = 0; index < probes.size(); ++index) {
-      if (!within[index].ok()) return within[index].status();
-      within_at[probes[index]] = *within[index];
-    }
-    while (lo < hi) {
-      const auto made = within_at.find(lo + (hi - lo) / 2);
-      if (made == within_at.end()) break;
-      if (made->second) {
-        hi = made->first;
-      } else {
-        lo = made->first + 1;
-      }
-    }
-  }
-  return hi;
-}
-
-// What the first task of Bake's default ladder computes (SolveLadderBottom).
-struct LadderBottom {
-  Status status;
-  // The ladder's smallest level, and the level the search found below it.
-  std::map<int, core::LevelResult> levels;
-  // The motion the search's probes run on (ProbeMotion), for a search after the ladder too.
-  std::optional<StatusOr<std::shared_ptr<const core::PreparedMotion>>> probe_motion;
-  // The count the search below the smallest level ended on, if that level is within the
-  // bound and a level may keep fewer joints; a failure of the search or of the level it
-  // found stays here, for the caller to report if it uses the search.
-  std::optional<StatusOr<int>> search;
-};
-
-// The ladder's smallest level (`smallest` joints: its solve and its baseline, the first
-// step of a core::BaselineSequence), the search's probe motion, and, when that level is
-// within `bound`, the search for the smallest useful level below it ([minimum, smallest])
-// and that level, solved unless it is the smallest. A level a joint below continues the
-// sequence, evaluating only the joints whose nearest kept joint changes (Fox's on 2
-// threads: its final level 86 -> 65 us); one further below gets a baseline of its own: the
-// more joints change, the more a step costs, and a sequence's evaluation runs as one piece
-// where BaselineErrors runs as two. Neither the search nor that level depend on the
-// ladder's larger levels, only on whether one of them is over the bound (Bake's check).
-// The search probes one count at a time: the other threads have those levels to solve,
-// so a probe beside it, in a bracket the bisection may never need, would mostly cost this
-// thread (Fox's 4 probes in 2 rounds of 2 became 3).
-LadderBottom SolveLadderBottom(const std::shared_ptr<const core::PreparedMotion>& prepared,
-                               const core::JointRanking& ranking, int smallest, int minimum,
-                               double bound, TaskPool& pool, const std::atomic<bool>* cancel) {
-  LadderBottom bottom;
-  std::unique_ptr<core::BaselineSequence> chain;
-  bottom.status =
-      SolveLevels(prepared, ranking, {smallest}, pool, bottom.levels, {}, cancel, {}, &chain);
-  if (!bottom.status.ok()) return bottom;
-  bottom.probe_motion = ProbeMotion(prepared);
-  if (minimum >= smallest ||
-      !(bottom.levels.at(smallest).optimized.max_vertex_error_pct <= bound) ||
-      !bottom.probe_motion->ok()) {
-    return bottom;
-  }
-  bottom.search = SmallestUsefulCount(***bottom.probe_motion, ranking, minimum, smallest, bound, 1,
-                                      pool, cancel);
-  if (bottom.search->ok() && **bottom.search != smallest) {
-    const int found = **bottom.search;
-    if (Status status = SolveLevels(prepared, ranking, {found}, pool, bottom.levels, {}, cancel, {},
-                                    found + 1 == smallest ? &chain : nullptr);
-        !status.ok()) {
-      bottom.search = status;
-    }
-  }
-  return bottom;
-}
 
 // PrepareInputs for a validated request, on `pool`, without the motion's check: Bake's
 // core entry points (the ranking, PreparedMotion::Create) each make it first.
@@ -396,14 +276,12 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
       2,
       [&](int task) {
         if (task == 0) {
-          ranked = core::RankJointsJob{&character, &motion, request.locked_joints}.Run(pool.Runner());
+          ranked = core::RankJointsJob{&character, &motion, request.locked_joints, request.simd}.Run(
+              pool.Runner());
           ranking_done = true;
         } else {
           created = core::PreparedMotion::Create(inputs->character, motion, request.settings,
-                                                 request.all_levels
-                                                     ? core::PreparedMotion::Workload::kEveryLevel
-                                                     : core::PreparedMotion::Workload::kSomeLevels,
-                                                 pool.Runner());
+                                                 request.simd, pool.Runner());
         }
       },
       [&](int) {
@@ -448,43 +326,19 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
                                       std::max<size_t>(counts.size() + (default_ladder ? 1 : 0), 1),
                     "solve");
   };
-  if (!default_ladder) {
-    if (Status status =
-            SolveLevels(*prepared, *ranking, counts, pool, solved, on_level_done, cancel);
-        !status.ok()) {
-      return status;
-    }
-  } else {
+  const auto solve = [&](std::vector<int> levels, const std::function<void(int)>& on_done) -> Status {
+    auto levels_solved =
+        SolveLevelsJob{*prepared, &*ranking, std::move(levels), on_done, cancel}.Run(pool);
+    if (!levels_solved.ok()) return levels_solved.status();
+    solved.merge(*levels_solved);
+    return Status::Ok();
+  };
+  if (Status status = solve(counts, on_level_done); !status.ok()) return status;
+  if (default_ladder) {
     // The smallest useful skeleton: the fewest joints whose optimised maximum vertex error
-    // is within the bound. The ladder's exact errors bracket it; bisection narrows the
-    // bracket (the error grows as joints go, though not strictly, so this finds a count
-    // that meets the bound with the one below failing; SmallestUsefulCount). The chosen
-    // level is then solved in full on every frame.
-    //
-    // The ladder's smallest level is the first task of the ladder's job, and when it is
-    // within the bound the same task goes on to the search below it and the level that
-    // search finds (LadderBottom), beside the larger levels: the search and that level no
-    // longer wait for the whole ladder with a thread idle at each end (Fox on 2 threads:
-    // the ladder, the search and the final level 548 -> 483 us). What the task found is
-    // used if no larger level is over the bound, which is when the bracket is the one it
-    // searched; otherwise the search below the ladder's lowest level over the bound runs
-    // after the ladder, as it must.
+    // is within the bound. The ladder's exact errors bracket it; the search narrows the
+    // bracket (core/smallest_level.h), and the level it finds is solved on every frame.
     const double bound = request.smallest_useful_error_pct;
-    const int smallest = counts.back();
-    LadderBottom bottom;
-    if (Status status =
-            SolveLevels(*prepared, *ranking, std::vector<int>(counts.begin(), counts.end() - 1),
-                        pool, solved, on_level_done, cancel,
-                        [&] {
-                          bottom = SolveLadderBottom(*prepared, *ranking, smallest, minimum, bound,
-                                                     pool, cancel);
-                        });
-        !status.ok()) {
-      return status;
-    }
-    if (!bottom.status.ok()) return bottom.status;
-    solved.insert(bottom.levels.extract(smallest));
-    on_level_done(static_cast<int>(solved.size()));
     int lo = minimum, hi = n;
     for (const auto& [count, result] : solved) {
       if (result.optimized.max_vertex_error_pct <= bound) {
@@ -494,28 +348,15 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
       }
     }
     lo = std::min(lo, hi);
-    if (lo < hi && bottom.search) {
-      if (!bottom.search->ok()) return bottom.search->status();
-      hi = **bottom.search;
-      if (hi != smallest) solved.insert(bottom.levels.extract(hi));
-    } else if (lo < hi) {
-      if (!bottom.probe_motion->ok()) return bottom.probe_motion->status();
-      auto found = SmallestUsefulCount(***bottom.probe_motion, *ranking, lo, hi, bound,
-                                       pool.threads(), pool, cancel);
-      if (!found.ok()) return found.status();
-      hi = *found;
-      if (!solved.count(hi)) {
-        if (Status status = SolveLevels(*prepared, *ranking, {hi}, pool, solved, {}, cancel);
-            !status.ok()) {
-          return status;
-        }
-      }
-    }
-    if (std::find(counts.begin(), counts.end(), hi) == counts.end()) {
-      counts.push_back(hi);
+    if (Cancelled(cancel)) return CancelledStatus();
+    auto found = core::SmallestLevelJob{prepared->get(), &*ranking, lo, hi, bound}.Run();
+    if (!found.ok()) return found.status();
+    if (!solved.count(*found)) {
+      if (Status status = solve({*found}, {}); !status.ok()) return status;
+      counts.push_back(*found);
       std::sort(counts.begin(), counts.end(), std::greater<>());
-      on_level_done(static_cast<int>(solved.size()));
     }
+    on_level_done(static_cast<int>(solved.size()));
   }
 
   // Fig. 7: the four variants at every level, errors only.
@@ -525,17 +366,14 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
                                   core::Variant::kVPNOPD}) {
       core::SolveSettings settings = request.settings;
       settings.variant = variant;
-      auto variant_prepared =
-          core::PreparedMotion::Create(inputs->character, motion, settings,
-                                       core::PreparedMotion::Workload::kEveryLevel, pool.Runner());
+      auto variant_prepared = core::PreparedMotion::Create(inputs->character, motion, settings,
+                                                           request.simd, pool.Runner());
       if (!variant_prepared.ok()) return variant_prepared.status();
       std::vector<int> every;
       for (int count = n; count >= minimum; --count) every.push_back(count);
-      std::map<int, core::LevelResult> results;
-      if (Status status = SolveLevels(*variant_prepared, *ranking, every, pool, results, {}, cancel);
-          !status.ok()) {
-        return status;
-      }
+      auto curve_levels = SolveLevelsJob{*variant_prepared, &*ranking, every, {}, cancel}.Run(pool);
+      if (!curve_levels.ok()) return curve_levels.status();
+      const std::map<int, core::LevelResult>& results = *curve_levels;
       VariantCurve curve{variant, {}};
       for (int count : every) {
         const core::LevelResult& r = results.at(count);

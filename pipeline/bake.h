@@ -19,6 +19,7 @@
 #include "core/character.h"
 #include "core/motion.h"
 #include "core/rank_joints.h"
+#include "core/simd.h"
 #include "core/solve_levels.h"
 #include "io/asset.h"
 
@@ -37,6 +38,9 @@ struct BakeRequest {
   bool all_levels = false;
   std::vector<std::string> locked_joints;  // never removed (sockets, IK targets)
   core::SolveSettings settings;
+  // The machine version of the core's hot loops (core/simd.h): the programs read it from
+  // MOTIONLOD_SIMD.
+  core::SimdChoice simd = core::SimdChoice::kWidest;
   // The smallest useful skeleton is the fewest joints whose optimised maximum vertex
   // error stays within this percentage of the character's height.
   double smallest_useful_error_pct = 10.0;
@@ -68,7 +72,7 @@ struct BakeOutput {
 };
 
 // Errors: the importer's and the core's Status, kInvalidArgument for bad requests, and
-// kNotFound ("cancelled") when *cancel becomes true.
+// kCancelled when *cancel becomes true.
 StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& progress = {},
                           const std::atomic<bool>* cancel = nullptr);
 
@@ -86,24 +90,22 @@ StatusOr<BakeInputs> PrepareInputs(const BakeRequest& request);
 double SkinningPassSeconds(const core::Character& character, const core::Motion& motion,
                            int threads);
 
-// The levels that keep `counts` joints (decreasing, each in [locked_count, n]: nested
-// levels of the ranking), solved on `pool` into `out` keyed by count, as Bake solves them:
-// each level's optimised half is a task, and so is its baseline, except that levels a joint
-// apart (every level) take their baselines one from the other in one task
-// (core::BaselineSequence). on_done(levels done so far) runs on the calling thread as
-// levels complete. `first`, if given, is one more task, the job's first (work of the
-// caller's that needs none of these levels; it may run jobs of its own on `pool`, and it
-// must not wait for a level). With `chain`, the last level's baseline is the next step of
-// *chain (a new sequence where it is empty), which then ends at that level: a later call
-// whose level keeps a subset of its joints can continue it. kNotFound ("cancelled") when
-// *cancel becomes true.
-Status SolveLevels(const std::shared_ptr<const core::PreparedMotion>& prepared,
-                   const core::JointRanking& ranking, const std::vector<int>& counts,
-                   TaskPool& pool, std::map<int, core::LevelResult>& out,
-                   const std::function<void(int)>& on_done = {},
-                   const std::atomic<bool>* cancel = nullptr,
-                   const std::function<void()>& first = {},
-                   std::unique_ptr<core::BaselineSequence>* chain = nullptr);
+// Solves the levels that keep `counts` joints (decreasing, each in [locked_count, n]:
+// nested levels of the ranking) as Bake solves them, on a pool: each level's optimised
+// half is a task, and so is its baseline, except that levels a joint apart (every level)
+// take their baselines one from the other in one task (core::BaselineSequence).
+struct SolveLevelsJob {
+  std::shared_ptr<const core::PreparedMotion> prepared;
+  const core::JointRanking* ranking = nullptr;
+  std::vector<int> counts;
+  // Runs on the calling thread as levels complete, with the number done so far.
+  std::function<void(int)> on_done = {};
+  const std::atomic<bool>* cancel = nullptr;  // kCancelled once it becomes true
+
+  Status Validate() const;
+  // The levels keyed by count.
+  StatusOr<std::map<int, core::LevelResult>> Run(TaskPool& pool) const;
+};
 
 // The default ladder for n joints and the minimum the locks allow: n, ~3n/4, ~n/2, ~n/4,
 // clamped to [minimum, n], duplicates removed, finest first (the smallest useful level is

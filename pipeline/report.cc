@@ -4,7 +4,7 @@
 #include <limits>
 #include <numeric>
 
-#include "base/simd.h"
+#include "core/simd.h"
 #include "proto/level_selection.h"
 
 namespace motionlod::pipeline {
@@ -131,7 +131,7 @@ json BuildReport(const ReportInputs& in) {
                       {"skinning_pass_seconds", in.skinning_pass_seconds},
                       {"bake_over_skinning_pass", in.skinning_pass_seconds > 0 ? in.bake_seconds / in.skinning_pass_seconds : 0.0},
                       {"threads", in.threads},
-                      {"simd", std::string(SimdVersionName())}};
+                      {"simd", std::string(core::SimdVersionName(in.request.simd))}};
   json levels = json::array();
   for (int count : in.counts) {
     const core::LevelResult& r = in.levels.at(count);

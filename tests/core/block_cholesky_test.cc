@@ -1,4 +1,4 @@
-#include "core/block_cholesky.h"
+#include "core/internal/block_cholesky.h"
 
 #include <random>
 

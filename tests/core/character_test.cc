@@ -7,6 +7,7 @@
 
 #include <gtest/gtest.h>
 
+#include "core/internal/skin_clusters.h"
 #include "tests/core/fixtures.h"
 
 namespace motionlod::core {
@@ -74,29 +75,29 @@ TEST(BuildCharacter, ClustersPartitionTheSkinAndBoundTheirVerticesAndWeights) {
   const Character& c = **built;
   const RawSkin& skin = c.skin();
   const int n = c.joint_count();
-  ASSERT_EQ(c.group_cluster_offsets().size(), static_cast<size_t>(n + 1));
-  const auto& vertex_offsets = c.cluster_vertex_offsets();
-  const size_t clusters = c.cluster_centers().size();
+  ASSERT_EQ(c.clusters().group_cluster_offsets.size(), static_cast<size_t>(n + 1));
+  const auto& vertex_offsets = c.clusters().cluster_vertex_offsets;
+  const size_t clusters = c.clusters().cluster_centers.size();
   ASSERT_EQ(vertex_offsets.size(), clusters + 1);
-  ASSERT_EQ(c.cluster_influence_offsets().size(), clusters + 1);
-  EXPECT_EQ(c.group_cluster_offsets().back(), clusters);
+  ASSERT_EQ(c.clusters().cluster_influence_offsets.size(), clusters + 1);
+  EXPECT_EQ(c.clusters().group_cluster_offsets.back(), clusters);
   EXPECT_GT(clusters, static_cast<size_t>(n));
   std::vector<int> seen(c.vertex_count(), 0);
   for (int group = 0; group < n; ++group) {
-    for (uint32_t cluster = c.group_cluster_offsets()[group]; cluster < c.group_cluster_offsets()[group + 1];
+    for (uint32_t cluster = c.clusters().group_cluster_offsets[group]; cluster < c.clusters().group_cluster_offsets[group + 1];
          ++cluster) {
       const uint32_t size = vertex_offsets[cluster + 1] - vertex_offsets[cluster];
       EXPECT_GE(size, 1u);
-      EXPECT_LE(size, static_cast<uint32_t>(Character::kMaxClusterVertices));
+      EXPECT_LE(size, static_cast<uint32_t>(internal::kMaxClusterVertices));
       // Each joint weighting a vertex of the cluster is listed with the range of its
       // weights: the smallest is 0 where a vertex of the cluster has no weight from it.
       std::vector<float> largest(n, 0.0f), smallest(n, 2.0f);
       std::vector<uint32_t> weighted(n, 0);
       for (uint32_t e = vertex_offsets[cluster]; e < vertex_offsets[cluster + 1]; ++e) {
-        const uint32_t i = c.cluster_vertices()[e];
+        const uint32_t i = c.clusters().cluster_vertices[e];
         ++seen[i];
-        const Vec3d offset = skin.positions[i].cast<double>() - c.cluster_centers()[cluster];
-        EXPECT_TRUE((offset.cwiseAbs().array() <= c.cluster_half_extents()[cluster].array() + 1e-9).all());
+        const Vec3d offset = skin.positions[i].cast<double>() - c.clusters().cluster_centers[cluster];
+        EXPECT_TRUE((offset.cwiseAbs().array() <= c.clusters().cluster_half_extents[cluster].array() + 1e-9).all());
         float dominant_weight = 0;
         int dominant = -1;
         for (uint32_t g = skin.influence_offsets[i]; g < skin.influence_offsets[i + 1]; ++g) {
@@ -112,9 +113,9 @@ TEST(BuildCharacter, ClustersPartitionTheSkinAndBoundTheirVerticesAndWeights) {
         EXPECT_EQ(dominant, group) << "vertex " << i;
       }
       std::vector<float> listed_max(n, 0.0f), listed_min(n, 0.0f), expected_min(n, 0.0f);
-      for (uint32_t q = c.cluster_influence_offsets()[cluster]; q < c.cluster_influence_offsets()[cluster + 1]; ++q) {
-        listed_max[c.cluster_influences()[q].joint] = c.cluster_influences()[q].max_weight;
-        listed_min[c.cluster_influences()[q].joint] = c.cluster_influences()[q].min_weight;
+      for (uint32_t q = c.clusters().cluster_influence_offsets[cluster]; q < c.clusters().cluster_influence_offsets[cluster + 1]; ++q) {
+        listed_max[c.clusters().cluster_influences[q].joint] = c.clusters().cluster_influences[q].max_weight;
+        listed_min[c.clusters().cluster_influences[q].joint] = c.clusters().cluster_influences[q].min_weight;
       }
       for (int j = 0; j < n; ++j) {
         if (weighted[j] == size) expected_min[j] = smallest[j];
@@ -122,22 +123,22 @@ TEST(BuildCharacter, ClustersPartitionTheSkinAndBoundTheirVerticesAndWeights) {
       EXPECT_EQ(listed_max, largest) << "cluster " << cluster;
       EXPECT_EQ(listed_min, expected_min) << "cluster " << cluster;
       // Its lane block: positions, then one row of weights per listed joint, padded.
-      const uint32_t padded = Character::ClusterLaneRow(size);
-      EXPECT_EQ(padded % Character::kClusterLanes, 0u);
-      EXPECT_LT(padded - size, static_cast<uint32_t>(Character::kClusterLanes));
+      const uint32_t padded = internal::ClusterLaneRow(size);
+      EXPECT_EQ(padded % internal::kClusterLanes, 0u);
+      EXPECT_LT(padded - size, static_cast<uint32_t>(internal::kClusterLanes));
       const uint32_t listed =
-          c.cluster_influence_offsets()[cluster + 1] - c.cluster_influence_offsets()[cluster];
-      ASSERT_EQ(c.cluster_lane_offsets()[cluster + 1] - c.cluster_lane_offsets()[cluster],
+          c.clusters().cluster_influence_offsets[cluster + 1] - c.clusters().cluster_influence_offsets[cluster];
+      ASSERT_EQ(c.clusters().cluster_lane_offsets[cluster + 1] - c.clusters().cluster_lane_offsets[cluster],
                 (3 + listed) * padded);
-      const float* block = c.cluster_lanes().data() + c.cluster_lane_offsets()[cluster];
+      const float* block = c.clusters().cluster_lanes.data() + c.clusters().cluster_lane_offsets[cluster];
       for (uint32_t v = 0; v < padded; ++v) {
         const bool real = v < size;
-        const uint32_t i = real ? c.cluster_vertices()[vertex_offsets[cluster] + v] : 0;
+        const uint32_t i = real ? c.clusters().cluster_vertices[vertex_offsets[cluster] + v] : 0;
         for (int a = 0; a < 3; ++a)
           EXPECT_EQ(block[a * padded + v], real ? skin.positions[i][a] : 0.0f);
         for (uint32_t q = 0; q < listed; ++q) {
           const int joint =
-              c.cluster_influences()[c.cluster_influence_offsets()[cluster] + q].joint;
+              c.clusters().cluster_influences[c.clusters().cluster_influence_offsets[cluster] + q].joint;
           float weight = 0;
           for (uint32_t g = skin.influence_offsets[i]; real && g < skin.influence_offsets[i + 1];
                ++g) {
@@ -149,7 +150,7 @@ TEST(BuildCharacter, ClustersPartitionTheSkinAndBoundTheirVerticesAndWeights) {
     }
   }
   for (int i = 0; i < c.vertex_count(); ++i) EXPECT_EQ(seen[i], 1) << "vertex " << i;
-  EXPECT_EQ(c.cluster_lanes().size(), c.cluster_lane_offsets().back());
+  EXPECT_EQ(c.clusters().cluster_lanes.size(), c.clusters().cluster_lane_offsets.back());
 }
 
 // One joint weighting every vertex of `positions`, which need no triangles.
@@ -187,18 +188,18 @@ TEST(BuildCharacter, ClustersAreMedianSplitsEvenWhereCoordinatesRepeat) {
     auto built = BuildCharacter(OneJointCloud(*positions));
     ASSERT_TRUE(built.ok()) << built.status().ToString();
     const Character& c = **built;
-    const auto& offsets = c.cluster_vertex_offsets();
+    const auto& offsets = c.clusters().cluster_vertex_offsets;
     std::vector<int> seen(p, 0);
     for (size_t cluster = 0; cluster + 1 < offsets.size(); ++cluster) {
       const uint32_t size = offsets[cluster + 1] - offsets[cluster];
-      EXPECT_GE(size, static_cast<uint32_t>(Character::kMaxClusterVertices / 2)) << "p " << p;
-      EXPECT_LE(size, static_cast<uint32_t>(Character::kMaxClusterVertices)) << "p " << p;
+      EXPECT_GE(size, static_cast<uint32_t>(internal::kMaxClusterVertices / 2)) << "p " << p;
+      EXPECT_LE(size, static_cast<uint32_t>(internal::kMaxClusterVertices)) << "p " << p;
       for (uint32_t e = offsets[cluster]; e < offsets[cluster + 1]; ++e) {
-        const uint32_t i = c.cluster_vertices()[e];
+        const uint32_t i = c.clusters().cluster_vertices[e];
         ++seen[i];
-        const Vec3d offset = c.skin().positions[i].cast<double>() - c.cluster_centers()[cluster];
+        const Vec3d offset = c.skin().positions[i].cast<double>() - c.clusters().cluster_centers[cluster];
         EXPECT_TRUE(
-            (offset.cwiseAbs().array() <= c.cluster_half_extents()[cluster].array() + 1e-9).all());
+            (offset.cwiseAbs().array() <= c.clusters().cluster_half_extents[cluster].array() + 1e-9).all());
       }
     }
     EXPECT_EQ(std::count(seen.begin(), seen.end(), 1), static_cast<std::ptrdiff_t>(p));
@@ -208,7 +209,7 @@ TEST(BuildCharacter, ClustersAreMedianSplitsEvenWhereCoordinatesRepeat) {
   const auto built = BuildCharacter(OneJointCloud(run));
   ASSERT_TRUE(built.ok());
   double covered = 0;
-  for (const Vec3d& half : (*built)->cluster_half_extents()) covered += 2 * half.x();
+  for (const Vec3d& half : (*built)->clusters().cluster_half_extents) covered += 2 * half.x();
   EXPECT_LE(covered, 2999.0);
 }
 

@@ -3,14 +3,25 @@
 #pragma once
 
 #include <cmath>
+#include <cstdlib>
 #include <memory>
 
 #include <Eigen/Geometry>
 
 #include "core/character.h"
 #include "core/motion.h"
+#include "core/simd.h"
 
 namespace motionlod::core::testing {
+
+// The machine version the tests run (core/simd.h): MOTIONLOD_SIMD, as the programs read
+// it, so that ctest runs the suites once per version.
+inline SimdChoice TestSimd() {
+  const char* setting = std::getenv("MOTIONLOD_SIMD");
+  const auto choice = ParseSimdChoice(setting != nullptr ? setting : "");
+  if (!choice.ok()) std::abort();
+  return *choice;
+}
 
 inline Affine34d Translation(double x, double y, double z) {
   Affine34d m = IdentityAffine();

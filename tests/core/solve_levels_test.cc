@@ -3,7 +3,7 @@
 #include <gtest/gtest.h>
 
 #include "core/rank_joints.h"
-#include "core/reference_solver.h"
+#include "core/reference/solve_frame_reference.h"
 #include "tests/core/fixtures.h"
 
 namespace motionlod::core {
@@ -12,6 +12,7 @@ namespace {
 using testing::BuildOrDie;
 using testing::MakeCreature;
 using testing::MakeWaveMotion;
+using testing::TestSimd;
 
 struct Scene {
   std::shared_ptr<const Character> character;
@@ -23,14 +24,14 @@ Scene MakeScene(int frames = 24) {
   Scene s;
   s.character = BuildOrDie(MakeCreature());
   s.motion = MakeWaveMotion(*s.character, frames);
-  s.ranking = *RankJointsJob{s.character.get(), &s.motion, {}}.Run();
+  s.ranking = *RankJointsJob{s.character.get(), &s.motion, {}, TestSimd()}.Run();
   return s;
 }
 
 std::shared_ptr<const PreparedMotion> Prepare(const Scene& s, Variant variant) {
   SolveSettings settings;
   settings.variant = variant;
-  auto prepared = PreparedMotion::Create(s.character, s.motion, settings);
+  auto prepared = PreparedMotion::Create(s.character, s.motion, settings, TestSimd());
   EXPECT_TRUE(prepared.ok()) << prepared.status().ToString();
   return *prepared;
 }
@@ -52,7 +53,7 @@ TEST(SolveLevel, LeastSquaresEqualsTheNaivePerFrameSolve) {
       const auto fast = prepared->SolveLeastSquares(level);
       ASSERT_TRUE(fast.ok());
       for (int t = 0; t < s.motion.frame_count; ++t) {
-        const std::vector<Affine34d> naive = SolveFrameNaive(*prepared, level, t);
+        const std::vector<Affine34d> naive = SolveFrameReference(*prepared, level, t);
         for (int slot = 0; slot < kept; ++slot) {
           const Affine34d k = fast->block<4, 3>(4 * slot, 3 * t).transpose();
           EXPECT_LE((k - naive[slot]).norm(), 1e-9 * naive[slot].norm())
@@ -70,7 +71,7 @@ TEST(SolveLevel, StoredMatricesAreTheLeastSquaresSolutionInFloat) {
     for (int kept : {1, 3, 5, 8}) {
       const LevelResult result = Solve(*prepared, s, kept);
       for (int t = 0; t < s.motion.frame_count; ++t) {
-        const std::vector<Affine34d> naive = SolveFrameNaive(*prepared, result.skeleton, t);
+        const std::vector<Affine34d> naive = SolveFrameReference(*prepared, result.skeleton, t);
         for (int slot = 0; slot < kept; ++slot) {
           const Affine34d fast = result.matrices[t * kept + slot].cast<double>();
           EXPECT_LE((fast - naive[slot]).norm(), 1e-5 * naive[slot].norm())
@@ -166,7 +167,7 @@ TEST(SolveLevel, ResolvedTranslationBeatsTheSolvedOne) {
   SolveSettings keep;
   keep.variant = Variant::kVPNOPD;
   keep.resolve_rigid_translation = false;
-  const auto kept_t = *PreparedMotion::Create(s.character, s.motion, keep);
+  const auto kept_t = *PreparedMotion::Create(s.character, s.motion, keep, TestSimd());
   const auto resolved = Prepare(s, Variant::kVPNOPD);
   for (int kept = 2; kept < s.character->joint_count(); ++kept) {
     const LevelResult a = Solve(*resolved, s, kept);

@@ -12,7 +12,12 @@
 
 #include "core/rank_joints.h"
 #include "core/reduce_skeleton.h"
-#include "core/reference_solver.h"
+#include "core/baseline_sequence.h"
+#include "core/internal/level_search.h"
+#include "core/internal/level_solve.h"
+#include "core/internal/prepared_data.h"
+#include "core/reference/level_errors_reference.h"
+#include "core/reference/solve_frame_reference.h"
 #include "core/solve_levels.h"
 #include "io/asset.h"
 #include "pipeline/bake.h"
@@ -89,7 +94,7 @@ TEST_F(RealData, FastSolverEqualsTheNaiveDenseSolvePerFrame) {
         const auto fast = prepared->SolveLeastSquares(level);
         ASSERT_TRUE(fast.ok());
         for (int t : {0, 5, 11}) {
-          const auto naive = core::SolveFrameNaive(*prepared, level, t);
+          const auto naive = core::SolveFrameReference(*prepared, level, t);
           for (int slot = 0; slot < kept; ++slot) {
             const core::Affine34d k = fast->block<4, 3>(4 * slot, 3 * t).transpose();
             EXPECT_LE((k - naive[slot]).norm(), 1e-9 * naive[slot].norm())
@@ -300,44 +305,42 @@ TEST_F(RealData, VertexFiguresMatchBruteForce) {
   }
 }
 
-// Workload::kEveryLevel evaluates the quadratic forms of levels with few joints in the kept
-// joints' space: the same errors to rounding, at every level, optimised and baseline.
-TEST_F(RealData, EveryLevelWorkloadGivesTheSameErrors) {
+// The figures of real characters' levels, optimised and baseline, are those of their
+// skinned meshes (core/reference/level_errors_reference.h), also 1000 heights from the
+// origin, where a careless expansion of the quadratic forms would lose every digit.
+TEST_F(RealData, LevelFiguresAreThoseOfTheSkinnedMesh) {
   for (const char* file : {"characters/stormtrooper.dae", "characters/Orc.gltf", "motions/cmu_131_01.bvh"}) {
-    // Far from the origin (1000 heights away) the expanded forms would lose every digit if
-    // the root's translation were not taken out.
     for (const double distance : {0.0, 1000.0}) {
-      RealScene s = Load(file, 0, 60);
+      RealScene s = Load(file, 0, 24);
       const double height = s.inputs.character->height();
       for (core::Affine34d& w : s.inputs.motion.joint_world) w(0, 3) += distance * height;
       const int n = s.inputs.character->joint_count();
-      for (core::Variant variant : {core::Variant::kVP, core::Variant::kVPNO, core::Variant::kVPNOPD}) {
+      for (core::Variant variant : {core::Variant::kVP, core::Variant::kVPNOPD}) {
         core::SolveSettings settings;
         settings.variant = variant;
-        const auto some = *core::PreparedMotion::Create(s.inputs.character, s.inputs.motion, settings);
-        const auto every = *core::PreparedMotion::Create(s.inputs.character, s.inputs.motion, settings,
-                                                         core::PreparedMotion::Workload::kEveryLevel);
-        for (int kept = n; kept >= s.ranking.locked_count; --kept) {
+        const auto prepared = *core::PreparedMotion::Create(s.inputs.character, s.inputs.motion, settings);
+        for (int kept : {n - 1, n / 2, std::max(s.ranking.locked_count, 3)}) {
           const core::ReducedSkeleton level = Level(s, kept);
-          const auto a = some->SolveLevel(level);
-          const auto b = every->SolveLevel(level);
-          ASSERT_TRUE(a.ok() && b.ok());
+          const auto result = prepared->SolveLevel(level);
+          ASSERT_TRUE(result.ok());
+          const auto solution = core::internal::SolveVariant(prepared->data(), level);
+          const core::LevelErrors optimized =
+              core::LevelErrorsReference(*prepared, level, solution->Matrices(prepared->data()));
+          const core::LevelErrors baseline = core::BaselineErrorsReference(*prepared, level);
           const std::string where = std::string(file) + " " + core::VariantName(variant) + " at " +
                                     std::to_string(distance) + " kept " + std::to_string(kept);
-          for (size_t t = 0; t < a->optimized.e.size(); ++t) {
-            EXPECT_NEAR(b->optimized.ep_vertex[t], a->optimized.ep_vertex[t],
-                        1e-9 * a->optimized.ep_vertex[t] + 1e-12 * height * height)
+          for (size_t t = 0; t < optimized.e.size(); ++t) {
+            EXPECT_NEAR(result->optimized.ep_vertex[t], optimized.ep_vertex[t],
+                        1e-9 * optimized.ep_vertex[t] + 1e-12 * height * height)
                 << where << " frame " << t;
-            EXPECT_NEAR(b->optimized.en_vertex[t], a->optimized.en_vertex[t],
-                        1e-9 * a->optimized.en_vertex[t] + 1e-12)
-                << where << " frame " << t;
-            EXPECT_NEAR(b->optimized.e[t], a->optimized.e[t], 1e-9 * a->optimized.e[t] + 1e-13) << where;
-            EXPECT_NEAR(b->baseline.e[t], a->baseline.e[t], 1e-9 * a->baseline.e[t] + 1e-13) << where;
-            if (variant == core::Variant::kVPNO) {  // a least-squares optimum, as in the default
-              EXPECT_LE(b->optimized.e[t], b->baseline.e[t] * (1 + 1e-9) + 1e-12) << where;
-            }
+            EXPECT_NEAR(result->optimized.e[t], optimized.e[t], 1e-9 * optimized.e[t] + 1e-13) << where;
+            EXPECT_NEAR(result->baseline.e[t], baseline.e[t], 1e-9 * baseline.e[t] + 1e-13) << where;
           }
-          EXPECT_EQ(b->optimized.max_vertex_error_pct, a->optimized.max_vertex_error_pct) << where;
+          // The search does not refine below 1e-4 % of the height (max_vertex_error.cc).
+          EXPECT_NEAR(result->optimized.max_vertex_error_pct, optimized.max_vertex_error_pct,
+                      1e-5 * optimized.max_vertex_error_pct + 1e-4) << where;
+          EXPECT_NEAR(result->baseline.max_vertex_error_pct, baseline.max_vertex_error_pct,
+                      1e-5 * baseline.max_vertex_error_pct + 1e-4) << where;
         }
       }
     }
@@ -448,11 +451,11 @@ TEST_F(RealData, MaxVertexErrorWithinDecidesLikeTheExactMaximum) {
         const std::string where = std::string(file) + " " + core::VariantName(variant) + " kept " +
                                   std::to_string(kept) + " max " + std::to_string(maximum);
         ASSERT_GT(maximum, 1e-3) << where;
-        EXPECT_TRUE(*prepared->MaxVertexErrorWithin(level, maximum * 1.001)) << where;
-        EXPECT_FALSE(*prepared->MaxVertexErrorWithin(level, maximum * 0.999)) << where;
-        EXPECT_FALSE(*prepared->MaxVertexErrorWithin(level, maximum * 0.2)) << where;
+        EXPECT_TRUE(*core::internal::MaxVertexErrorWithin(*prepared, level, maximum * 1.001)) << where;
+        EXPECT_FALSE(*core::internal::MaxVertexErrorWithin(*prepared, level, maximum * 0.999)) << where;
+        EXPECT_FALSE(*core::internal::MaxVertexErrorWithin(*prepared, level, maximum * 0.2)) << where;
       }
-      EXPECT_FALSE(prepared->MaxVertexErrorWithin(Level(s, 2), 0).ok());
+      EXPECT_FALSE(core::internal::MaxVertexErrorWithin(*prepared, Level(s, 2), 0).ok());
     }
   }
 }
@@ -467,54 +470,50 @@ TEST_F(RealData, EveryNthFrameSolvesTheFullMotionsProblemOnItsFrames) {
     const int n = s.inputs.character->joint_count();
     const int frames = s.inputs.motion.frame_count;
     for (core::Variant variant : {core::Variant::kVP, core::Variant::kVPNOPD}) {
-      for (auto workload : {core::PreparedMotion::Workload::kSomeLevels,
-                            core::PreparedMotion::Workload::kEveryLevel}) {
-        core::SolveSettings settings;
-        settings.variant = variant;
-        const auto full =
-            *core::PreparedMotion::Create(s.inputs.character, s.inputs.motion, settings, workload);
-        const auto strided = full->EveryNthFrame(kStride);
-        ASSERT_TRUE(strided.ok()) << strided.status().ToString();
-        const core::PreparedMotion& every_third = **strided;
-        ASSERT_EQ(every_third.frame_count(), (frames + kStride - 1) / kStride) << file;
-        EXPECT_EQ(every_third.alpha(), full->alpha());
-        EXPECT_EQ(every_third.beta(), full->beta());
-        for (int kept : {n, n / 2, 2}) {
-          const core::ReducedSkeleton level = Level(s, kept);
-          const auto a = full->SolveLevel(level);
-          const auto b = every_third.SolveLevel(level);
-          ASSERT_TRUE(a.ok() && b.ok()) << file;
-          const std::string where = std::string(file) + " " + core::VariantName(variant) +
-                                    " kept " + std::to_string(kept);
-          for (int t = 0; t < every_third.frame_count(); ++t) {
-            const int source = t * kStride;
-            for (int slot = 0; slot < kept; ++slot) {
-              const core::RowMajorAffine34f& ka =
-                  a->matrices[static_cast<size_t>(source) * kept + slot];
-              const core::RowMajorAffine34f& kb = b->matrices[static_cast<size_t>(t) * kept + slot];
-              EXPECT_LE((ka - kb).norm(), 1e-5f * (1 + ka.norm())) << where << " frame " << source;
-            }
-            EXPECT_NEAR(b->optimized.e[t], a->optimized.e[source],
-                        1e-9 * a->optimized.e[source] + 1e-13)
-                << where << " frame " << source;
-            EXPECT_NEAR(b->baseline.e[t], a->baseline.e[source],
-                        1e-9 * a->baseline.e[source] + 1e-13)
-                << where << " frame " << source;
+      core::SolveSettings settings;
+      settings.variant = variant;
+      const auto full = *core::PreparedMotion::Create(s.inputs.character, s.inputs.motion, settings);
+      const auto strided = core::internal::EveryNthFrame(*full, kStride);
+      ASSERT_TRUE(strided.ok()) << strided.status().ToString();
+      const core::PreparedMotion& every_third = **strided;
+      ASSERT_EQ(every_third.frame_count(), (frames + kStride - 1) / kStride) << file;
+      EXPECT_EQ(every_third.alpha(), full->alpha());
+      EXPECT_EQ(every_third.beta(), full->beta());
+      for (int kept : {n, n / 2, 2}) {
+        const core::ReducedSkeleton level = Level(s, kept);
+        const auto a = full->SolveLevel(level);
+        const auto b = every_third.SolveLevel(level);
+        ASSERT_TRUE(a.ok() && b.ok()) << file;
+        const std::string where = std::string(file) + " " + core::VariantName(variant) +
+                                  " kept " + std::to_string(kept);
+        for (int t = 0; t < every_third.frame_count(); ++t) {
+          const int source = t * kStride;
+          for (int slot = 0; slot < kept; ++slot) {
+            const core::RowMajorAffine34f& ka =
+                a->matrices[static_cast<size_t>(source) * kept + slot];
+            const core::RowMajorAffine34f& kb = b->matrices[static_cast<size_t>(t) * kept + slot];
+            EXPECT_LE((ka - kb).norm(), 1e-5f * (1 + ka.norm())) << where << " frame " << source;
           }
-          // Its maximum vertex error is the full one's over fewer frames.
-          EXPECT_LE(b->optimized.max_vertex_error_pct,
-                    a->optimized.max_vertex_error_pct * (1 + 1e-6))
-              << where;
-          if (kept < n) {
-            EXPECT_GT(b->optimized.max_vertex_error_pct, 0) << where;
-          }
+          EXPECT_NEAR(b->optimized.e[t], a->optimized.e[source],
+                      1e-9 * a->optimized.e[source] + 1e-13)
+              << where << " frame " << source;
+          EXPECT_NEAR(b->baseline.e[t], a->baseline.e[source],
+                      1e-9 * a->baseline.e[source] + 1e-13)
+              << where << " frame " << source;
+        }
+        // Its maximum vertex error is the full one's over fewer frames.
+        EXPECT_LE(b->optimized.max_vertex_error_pct,
+                  a->optimized.max_vertex_error_pct * (1 + 1e-6))
+            << where;
+        if (kept < n) {
+          EXPECT_GT(b->optimized.max_vertex_error_pct, 0) << where;
         }
       }
     }
     const auto prepared = Prepare(s, core::Variant::kVP);
-    EXPECT_FALSE(prepared->EveryNthFrame(0).ok());
+    EXPECT_FALSE(core::internal::EveryNthFrame(*prepared, 0).ok());
     // A stride past the last frame keeps the first frame alone.
-    const auto first = prepared->EveryNthFrame(std::numeric_limits<int>::max());
+    const auto first = core::internal::EveryNthFrame(*prepared, std::numeric_limits<int>::max());
     ASSERT_TRUE(first.ok());
     EXPECT_EQ((*first)->frame_count(), 1);
     EXPECT_TRUE((*first)->SolveLevel(Level(s, 2)).ok()) << file;

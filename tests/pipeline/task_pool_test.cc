@@ -10,6 +10,7 @@
 
 #include "base/parallel.h"
 #include "core/character.h"
+#include "core/internal/skin_clusters.h"
 #include "core/rank_joints.h"
 #include "core/reduce_skeleton.h"
 #include "core/solve_levels.h"
@@ -154,27 +155,27 @@ TEST(TaskPool, BuildsTheSameCharacterAsOneThread) {
     EXPECT_EQ(split->height(), one->height()) << file;
     EXPECT_EQ(split->vertex_areas(), one->vertex_areas()) << file;
     EXPECT_EQ(split->subtree_lengths(), one->subtree_lengths()) << file;
-    EXPECT_EQ(split->joint_vertex_centers(), one->joint_vertex_centers()) << file;
-    EXPECT_EQ(split->joint_vertex_half_extents(), one->joint_vertex_half_extents()) << file;
-    EXPECT_EQ(split->cluster_vertices(), one->cluster_vertices()) << file;
-    EXPECT_EQ(split->cluster_vertex_offsets(), one->cluster_vertex_offsets()) << file;
-    EXPECT_EQ(split->cluster_centers(), one->cluster_centers()) << file;
-    EXPECT_EQ(split->group_cluster_offsets(), one->group_cluster_offsets()) << file;
-    EXPECT_EQ(split->group_centers(), one->group_centers()) << file;
-    EXPECT_EQ(split->group_half_extents(), one->group_half_extents()) << file;
-    EXPECT_EQ(split->cluster_half_extents(), one->cluster_half_extents()) << file;
-    EXPECT_EQ(split->group_influence_offsets(), one->group_influence_offsets()) << file;
-    EXPECT_EQ(split->cluster_influence_offsets(), one->cluster_influence_offsets()) << file;
-    const auto same_ranges = [](const std::vector<core::Character::InfluenceRange>& a,
-                                const std::vector<core::Character::InfluenceRange>& b) {
+    EXPECT_EQ(split->clusters().joint_vertex_centers, one->clusters().joint_vertex_centers) << file;
+    EXPECT_EQ(split->clusters().joint_vertex_half_extents, one->clusters().joint_vertex_half_extents) << file;
+    EXPECT_EQ(split->clusters().cluster_vertices, one->clusters().cluster_vertices) << file;
+    EXPECT_EQ(split->clusters().cluster_vertex_offsets, one->clusters().cluster_vertex_offsets) << file;
+    EXPECT_EQ(split->clusters().cluster_centers, one->clusters().cluster_centers) << file;
+    EXPECT_EQ(split->clusters().group_cluster_offsets, one->clusters().group_cluster_offsets) << file;
+    EXPECT_EQ(split->clusters().group_centers, one->clusters().group_centers) << file;
+    EXPECT_EQ(split->clusters().group_half_extents, one->clusters().group_half_extents) << file;
+    EXPECT_EQ(split->clusters().cluster_half_extents, one->clusters().cluster_half_extents) << file;
+    EXPECT_EQ(split->clusters().group_influence_offsets, one->clusters().group_influence_offsets) << file;
+    EXPECT_EQ(split->clusters().cluster_influence_offsets, one->clusters().cluster_influence_offsets) << file;
+    const auto same_ranges = [](const std::vector<core::internal::InfluenceRange>& a,
+                                const std::vector<core::internal::InfluenceRange>& b) {
       return std::equal(a.begin(), a.end(), b.begin(), b.end(), [](const auto& x, const auto& y) {
         return x.joint == y.joint && x.min_weight == y.min_weight && x.max_weight == y.max_weight;
       });
     };
-    EXPECT_TRUE(same_ranges(split->group_influences(), one->group_influences())) << file;
-    EXPECT_TRUE(same_ranges(split->cluster_influences(), one->cluster_influences())) << file;
-    EXPECT_EQ(split->cluster_lane_offsets(), one->cluster_lane_offsets()) << file;
-    EXPECT_EQ(split->cluster_lanes(), one->cluster_lanes()) << file;
+    EXPECT_TRUE(same_ranges(split->clusters().group_influences, one->clusters().group_influences)) << file;
+    EXPECT_TRUE(same_ranges(split->clusters().cluster_influences, one->clusters().cluster_influences)) << file;
+    EXPECT_EQ(split->clusters().cluster_lane_offsets, one->clusters().cluster_lane_offsets) << file;
+    EXPECT_EQ(split->clusters().cluster_lanes, one->clusters().cluster_lanes) << file;
     ASSERT_EQ(split->joint_pair_moments().size(), one->joint_pair_moments().size()) << file;
     for (size_t q = 0; q < one->joint_pair_moments().size(); ++q) {
       const auto& a = split->joint_pair_moments()[q];
@@ -245,8 +246,8 @@ TEST(TaskPool, RanksTheSameAsOneThread) {
   }
 }
 
-// An every-level prepared motion made in pieces on a pool solves the levels it solves made
-// on one thread, to the bit (its kept-space forms are per frame).
+// A prepared motion made in pieces on a pool solves the levels it solves made on one
+// thread, to the bit.
 TEST(TaskPool, PreparesTheSameMotionAsOneThread) {
   const std::filesystem::path data = MOTIONLOD_SHARED_DATA;
   if (!std::filesystem::exists(data / "MANIFEST.md")) GTEST_SKIP() << "../shared/data is absent";
@@ -255,11 +256,9 @@ TEST(TaskPool, PreparesTheSameMotionAsOneThread) {
     const auto inputs = InputsOf(file);
     ASSERT_TRUE(inputs.ok()) << file;
     const auto ranking = *core::RankJointsJob{inputs->character.get(), &inputs->motion, {}}.Run();
-    constexpr auto kEveryLevel = core::PreparedMotion::Workload::kEveryLevel;
-    const auto one =
-        *core::PreparedMotion::Create(inputs->character, inputs->motion, {}, kEveryLevel);
+    const auto one = *core::PreparedMotion::Create(inputs->character, inputs->motion, {});
     const auto split = *core::PreparedMotion::Create(inputs->character, inputs->motion, {},
-                                                     kEveryLevel, pool.Runner());
+                                                     core::SimdChoice::kWidest, pool.Runner());
     const int n = inputs->character->joint_count();
     for (int kept : {n - 1, n / 2, 3}) {
       const auto level = *core::ReduceSkeletonToCount(*inputs->character, ranking, kept);

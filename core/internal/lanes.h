@@ -1,6 +1,6 @@
 // Short vectors of doubles and floats for the hot loops (GCC's and clang's vector
 // extensions): Lanes4 and Lanes8f are one 256-bit register each in the AVX2 version
-// (base/simd.h), two 128-bit ones in the baseline; Lanes2 and Lanes4f one 128-bit register.
+// (core/internal/simd_dispatch.h), two 128-bit ones in the baseline; Lanes2 and Lanes4f one 128-bit register.
 // The Unaligned types read or write that many contiguous elements at any address, one
 // unaligned load or store each, through AsLanes*. (A memcpy of several into an array of
 // vectors went through the stack in 16-byte halves, and each 32-byte read of them then
@@ -8,7 +8,7 @@
 // other in registers.
 #pragma once
 
-namespace motionlod {
+namespace motionlod::core {
 
 typedef double Lanes2 __attribute__((vector_size(2 * sizeof(double))));
 typedef double Lanes4 __attribute__((vector_size(4 * sizeof(double))));
@@ -54,7 +54,7 @@ inline void Transpose4(const Lanes4 x[4], Lanes4 rows[4]) {
 // to[c + r * to_stride] = from[r + c * from_stride] for r < rows, c < cols (column-major
 // blocks, strides in doubles): four by four in registers (Transpose4), the edges element
 // by element. Element by element throughout (Eigen's transposed copy), every element was
-// a load and a store of its own. Inline, so that a caller's AVX2 version (base/simd.h)
+// a load and a store of its own. Inline, so that a caller's AVX2 version (core/internal/simd_dispatch.h)
 // runs it 256 bits wide.
 inline void TransposeDoubles(const double* from, long from_stride, long rows, long cols, double* to,
                              long to_stride) {
@@ -76,4 +76,4 @@ inline void TransposeDoubles(const double* from, long from_stride, long rows, lo
   }
 }
 
-}  // namespace motionlod
+}  // namespace motionlod::core

@@ -1,4 +1,4 @@
-#include "core/reference_solver.h"
+#include "core/reference/solve_frame_reference.h"
 
 #include <cmath>
 #include <numeric>
@@ -7,7 +7,7 @@
 
 namespace motionlod::core {
 
-std::vector<Affine34d> SolveFrameNaive(const PreparedMotion& prepared,
+std::vector<Affine34d> SolveFrameReference(const PreparedMotion& prepared,
                                        const ReducedSkeleton& level, int frame) {
   const Character& c = prepared.character();
   const RawSkin& skin = c.skin();

@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "base/status.h"
+#include "core/simd.h"
 
 namespace motionlod::core {
 
@@ -27,7 +28,7 @@ using ::motionlod::StatusOr;
 // first: row i of panel_r becomes M times row i of panel_q, added to what it holds with
 // kAccumulate. Iteration i reads and writes row i only, so the panels may be the same one
 // (the diagonal steps of the solves) and the loop vectorises over the rows. Inline, so
-// that a caller's AVX2 version (base/simd.h) runs it 256 bits wide.
+// that a caller's AVX2 version (core/internal/simd_dispatch.h) runs it 256 bits wide.
 template <int B, bool kAccumulate>
 inline void PanelProduct(double* panel_r, const double* panel_q,
                          const Eigen::Matrix<double, B, B>& m, Eigen::Index rows,
@@ -103,8 +104,10 @@ class BlockCholesky {
  public:
   using Block = Eigen::Matrix<double, B, B>;
 
-  // Fails (kInternal) when A is not numerically positive definite.
-  static StatusOr<BlockCholesky> Factor(const BlockSymmetric<B>& a);
+  // Fails (kInternal) when A is not numerically positive definite. `simd`: the machine
+  // version of the factor and of its solves (core/simd.h).
+  static StatusOr<BlockCholesky> Factor(const BlockSymmetric<B>& a,
+                                        SimdChoice simd = SimdChoice::kWidest);
 
   // X = A^-1 Y for the right-hand sides given transposed, bt = Y^T (cols x B blocks);
   // returns X (B blocks x cols). The right-hand sides go through in row chunks whose
@@ -118,6 +121,7 @@ class BlockCholesky {
     Block diagonal_inverse;  // L_qq^-1, lower triangular
     uint32_t begin = 0, end = 0;  // its blocks in below_
   };
+  SimdChoice simd_ = SimdChoice::kWidest;
   std::vector<Column> columns_;  // column q is block count - 1 - q of A
   // Every column's (r, L_rq), r > q in elimination order: column s's in [begin, end) of
   // its Column, in the order of A's blocks, then of the fill. Sized by a pass over the
