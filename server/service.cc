@@ -122,6 +122,24 @@ std::string MotionId(const std::string& character_id, const std::string& source_
                        "\nanimation " + std::to_string(animation.size()) + ":" + animation + "\n");
 }
 
+// The record of animation `animation` of the upload `source_id` as a motion of
+// `character_id`; `source` is "character" (the character's own upload) or "file".
+MotionRecord MakeMotionRecord(const std::string& character_id, const std::string& source,
+                              const std::string& source_id, const io::AnimationInfo& animation,
+                              int64_t created_ms) {
+  MotionRecord m;
+  m.id = MotionId(character_id, source_id, animation.name);
+  m.character_id = character_id;
+  m.animation = animation.name;
+  m.source = source;
+  m.source_id = source_id;
+  m.duration_seconds = animation.duration_seconds;
+  m.source_fps = animation.source_fps;
+  m.frames = animation.source_frame_count;
+  m.created_ms = created_ms;
+  return m;
+}
+
 std::vector<api::FileInfo> ToFileInfos(const std::vector<FileRecord>& files) {
   std::vector<api::FileInfo> infos;
   for (const FileRecord& f : files)
@@ -485,19 +503,8 @@ Result<Created<api::CharacterInfo>> Service::UploadCharacter(std::vector<io::Sou
   record.warnings = (*asset)->warnings();
   record.created_ms = NowMs();
   std::vector<MotionRecord> motions;
-  for (const io::AnimationInfo& a : (*asset)->animations()) {
-    MotionRecord m;
-    m.id = MotionId(id, id, a.name);
-    m.character_id = id;
-    m.animation = a.name;
-    m.source = "character";
-    m.source_id = id;
-    m.duration_seconds = a.duration_seconds;
-    m.source_fps = a.source_fps;
-    m.frames = a.source_frame_count;
-    m.created_ms = record.created_ms;
-    motions.push_back(std::move(m));
-  }
+  for (const io::AnimationInfo& a : (*asset)->animations())
+    motions.push_back(MakeMotionRecord(id, "character", id, a, record.created_ms));
   auto inserted = store_->InsertCharacter(record, motions);
   if (!inserted.ok()) return Internal(inserted.status());
   CacheAsset(id, *asset);
@@ -591,15 +598,7 @@ Result<Created<std::vector<api::MotionInfo>>> Service::UploadMotion(
         first_error = "animation '" + a.name + "': " + retargeted.status().message();
       continue;
     }
-    MotionRecord m;
-    m.id = MotionId(character_id, source_id, a.name);
-    m.character_id = character_id;
-    m.animation = a.name;
-    m.source = "file";
-    m.source_id = source_id;
-    m.duration_seconds = a.duration_seconds;
-    m.source_fps = a.source_fps;
-    m.frames = a.source_frame_count;
+    MotionRecord m = MakeMotionRecord(character_id, "file", source_id, a, now);
     for (const std::string& joint : retargeted->unmatched_target_joints) {
       m.warnings.push_back("joint '" + joint +
                            "' has no match in the motion: it keeps its bind pose");
@@ -607,7 +606,6 @@ Result<Created<std::vector<api::MotionInfo>>> Service::UploadMotion(
     for (const std::string& joint : retargeted->unmatched_source_joints) {
       m.warnings.push_back("the motion's joint '" + joint + "' matches no joint of the character");
     }
-    m.created_ms = now;
     motions.push_back(std::move(m));
   }
   if (motions.empty()) {
