@@ -545,19 +545,7 @@ Result<Done> Service::DeleteCharacter(const std::string& id) {
       return Error(ErrorKind::kNotFound, "no character " + id);
     return Internal(blobs.status());
   }
-  for (const BakeRecord& bake : *bakes) {
-    if (queue_) queue_->Remove(bake.id);
-    {
-      std::lock_guard lock(board_mutex_);
-      if (auto found = board_.find(bake.id); found != board_.end()) {
-        found->second.cancel->store(true);
-        board_.erase(found);
-      }
-    }
-    std::lock_guard lock(tables_mutex_);
-    tables_.erase(bake.id);
-  }
-  board_changed_.notify_all();
+  for (const BakeRecord& bake : *bakes) ForgetBake(bake.id);
   {
     std::lock_guard lock(assets_mutex_);
     assets_.remove_if([&](const auto& entry) { return entry.first == id; });
@@ -1079,6 +1067,13 @@ Result<Done> Service::DeleteBake(const std::string& id) {
       return Error(ErrorKind::kNotFound, "no bake " + id);
     return Internal(blobs.status());
   }
+  ForgetBake(id);
+  CollectBlobs(*blobs);
+  spdlog::info("deleted bake {}", id);
+  return Done{};
+}
+
+void Service::ForgetBake(const std::string& id) {
   if (queue_) queue_->Remove(id);
   {
     std::lock_guard lock(board_mutex_);
@@ -1088,13 +1083,8 @@ Result<Done> Service::DeleteBake(const std::string& id) {
     }
   }
   board_changed_.notify_all();
-  {
-    std::lock_guard lock(tables_mutex_);
-    tables_.erase(id);
-  }
-  CollectBlobs(*blobs);
-  spdlog::info("deleted bake {}", id);
-  return Done{};
+  std::lock_guard lock(tables_mutex_);
+  tables_.erase(id);
 }
 
 Result<api::LevelChoice> Service::ChooseLevel(const std::string& bake_id, double px,

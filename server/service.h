@@ -168,6 +168,8 @@ class Service {
   proto::api::JobStatus ToStatus(const JobRecord& record, uint64_t version) const;
   Result<proto::api::BakeInfo> ToBakeInfo(const BakeRecord& bake);
   void CollectBlobs(const std::vector<std::string>& blobs);
+  // Stops the job of a bake whose rows are deleted and drops its cached level table.
+  void ForgetBake(const std::string& id);
   // Imports uploaded files in the sandboxed worker (never in this process).
   StatusOr<std::shared_ptr<const io::Asset>> Import(const std::vector<io::SourceFile>& files);
   Status StoreFiles(const std::vector<io::SourceFile>& files, std::vector<FileRecord>& records);
