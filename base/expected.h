@@ -2,7 +2,7 @@
 // value-or-error template of motionlod: StatusOr<T> (base/status.h) is an Expected with a
 // Status (adding status(), OK when there is a value), the client's Result<T>
 // (client/error.h) one with a client::Error and the daemon service's Result<T>
-// (server/service.h) one with a server::ServiceError.
+// (server/service_context.h) one with a server::ServiceError.
 #pragma once
 
 #include <utility>

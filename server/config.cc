@@ -297,6 +297,12 @@ Status ApplyEnvironment(const GetEnv& getenv, Config& config) {
     if (value == nullptr) continue;
     if (Status status = SetFromText(spec, value, variable, config); !status.ok()) return status;
   }
+  // The variable the bake tool reads too, for the same choice on a farm's every machine.
+  if (const char* value = getenv("MOTIONLOD_SIMD")) {
+    auto simd = core::ParseSimdChoice(value);
+    if (!simd.ok()) return InvalidArgument("MOTIONLOD_SIMD is " + simd.status().message());
+    config.simd = *simd;
+  }
   return Status::Ok();
 }
 

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "base/status.h"
+#include "core/simd.h"
 
 namespace motionlod::server {
 
@@ -33,6 +34,8 @@ struct Config {
   int queue_capacity = 64;    // queued jobs beyond which POST /v1/bakes answers 503
   double drain_seconds = 10;  // on SIGTERM, how long running bakes may finish before
                               // they are stopped and left queued for the next start
+  // The machine version of the bakes' hot loops (core/simd.h), from MOTIONLOD_SIMD.
+  core::SimdChoice simd = core::SimdChoice::kWidest;
 
   // Memory.
   int64_t cache_bytes = int64_t{256} << 20;  // LRU cache of level files

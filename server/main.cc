@@ -18,7 +18,7 @@
 #include <sstream>
 #include <thread>
 
-#include "base/simd.h"
+#include "core/simd.h"
 #include "pipeline/allocator.h"
 #include "server/config.h"
 #include "server/http_server.h"
@@ -68,7 +68,7 @@ void Seed(Service& service, const Options& options, const std::string& base_url)
     bytes << in.rdbuf();
     files.push_back({std::filesystem::path(path).filename().string(), bytes.str()});
   }
-  auto character = service.UploadCharacter(std::move(files));
+  auto character = service.characters().Upload(std::move(files));
   if (!character.ok()) {
     spdlog::error("seed: upload failed: {}", character.error().detail);
     return;
@@ -76,7 +76,7 @@ void Seed(Service& service, const Options& options, const std::string& base_url)
   proto::api::BakeRequest request;
   request.character = character->value.id;
   request.motion = options.seed_animation;
-  auto job = service.SubmitBake(request);
+  auto job = service.bakes().Submit(request);
   if (!job.ok()) {
     spdlog::error("seed: bake refused: {}", job.error().detail);
     return;
@@ -84,7 +84,7 @@ void Seed(Service& service, const Options& options, const std::string& base_url)
   const std::string id = job->value.id;
   proto::api::JobStatus status = job->value;
   while (status.state != "succeeded" && status.state != "failed" && !service.draining()) {
-    auto waited = service.WaitJob(id, status.version, 5.0);
+    auto waited = service.jobs().Wait(id, status.version, 5.0);
     if (!waited.ok()) return;
     status = waited.value();
   }
@@ -95,7 +95,7 @@ void Seed(Service& service, const Options& options, const std::string& base_url)
   std::printf("character %s: %s/v1/characters/%s\n", character->value.name.c_str(),
               base_url.c_str(), character->value.id.c_str());
   std::printf("bake (level table): %s/v1/bakes/%s\n", base_url.c_str(), id.c_str());
-  if (auto bake = service.GetBake(id); bake.ok()) {
+  if (auto bake = service.bakes().Get(id); bake.ok()) {
     for (const proto::api::LevelEntry& level : bake->levels) {
       std::string drawn = "never (a coarser level is as good)";
       if (level.chosen) {
@@ -133,10 +133,6 @@ int Main(int argc, char** argv) {
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
   ::signal(SIGPIPE, SIG_IGN);
 
-  if (const std::string problem = SimdSettingProblem(); !problem.empty()) {
-    std::fprintf(stderr, "motionlodd: %s\n", problem.c_str());
-    return 2;
-  }
   std::string text;
   auto options = ParseCommandLine(
       argc, argv, [](const char* name) { return std::getenv(name); }, &text);
@@ -193,7 +189,7 @@ int Main(int argc, char** argv) {
       config.bind.find(':') != std::string::npos ? "[" + config.bind + "]" : config.bind;
   const std::string base_url = "http://" + host + ":" + std::to_string(*port);
   spdlog::info("listening on {} (data in {}, {} connection threads, {} hot loops)", base_url,
-               config.data_dir, config.http_threads, SimdVersionName());
+               config.data_dir, config.http_threads, core::SimdVersionName(config.simd));
   spdlog::default_logger()->flush();
   std::printf("listening on %s\n", base_url.c_str());
   if (context.web != nullptr) std::printf("web viewer: %s/\n", base_url.c_str());

@@ -253,9 +253,9 @@ RangeAnswer ResolveRange(std::string_view header, uint64_t size, ByteRange& out)
   return RangeAnswer::kPartial;
 }
 
-void ServeLevel(Service& service, Request& request, Response& response) {
+void ServeLevel(Levels& levels, Request& request, Response& response) {
   const std::string& hash = request.path_params[0];
-  auto bytes = service.GetLevel(hash);
+  auto bytes = levels.Get(hash);
   if (!bytes.ok()) return Fail(request, response, bytes.error());
   const std::string etag = "\"" + hash + "\"";
   response.SetHeader("ETag", etag);
@@ -300,7 +300,7 @@ void ServeLevel(Service& service, Request& request, Response& response) {
 
 // Server-Sent Events of one job: a "progress" event per change, "done" at the end.
 struct EventStream {
-  Service* service = nullptr;
+  Jobs* jobs = nullptr;
   std::string id;
   uint64_t version = 0;
   uint64_t sequence = 0;
@@ -322,13 +322,13 @@ bool NextEvent(EventStream& state, http::StreamSink& sink) {
   const auto now = std::chrono::steady_clock::now();
   if (!state.started) {
     state.started = true;
-    auto status = state.service->GetJob(state.id);
+    auto status = state.jobs->Get(state.id);
     if (!status.ok()) return false;
     if (!sink.Write("retry: 2000\n\n")) return false;
     return WriteEvent(state, sink, status.value());
   }
-  if (now >= state.deadline || state.service->draining()) return false;
-  auto status = state.service->WaitJob(state.id, state.version, 1.0);
+  if (now >= state.deadline || state.jobs->draining()) return false;
+  auto status = state.jobs->Wait(state.id, state.version, 1.0);
   if (!status.ok()) {
     (void)sink.Write("event: gone\ndata: {}\n\n");
     return false;
@@ -406,6 +406,11 @@ int HttpStatus(ErrorKind kind) {
 
 http::Router MakeRouter(const RouteContext& context) {
   Service& service = *context.service;
+  Characters& characters = service.characters();
+  Motions& motions = service.motions();
+  Bakes& bakes = service.bakes();
+  Jobs& jobs = service.jobs();
+  Levels& levels = service.levels();
   const Config& config = *context.config;
   http::Router router;
 
@@ -446,35 +451,35 @@ http::Router MakeRouter(const RouteContext& context) {
 
   // Characters.
   router.Add("POST", "/v1/characters", Access::kWrite,
-             [&service, &config, context](Request& request, Response& response) {
+             [&characters, &config, context](Request& request, Response& response) {
                std::vector<io::SourceFile> files;
                if (!ReadUpload(request, response, config, context.open_uploads, files)) return;
-               auto uploaded = service.UploadCharacter(std::move(files));
+               auto uploaded = characters.Upload(std::move(files));
                if (!uploaded.ok()) return Fail(request, response, uploaded.error());
                response.SetJson(uploaded->created ? 201 : 200, Dump(json(uploaded->value)));
                response.SetHeader("Location", "/v1/characters/" + uploaded->value.id);
              });
   router.Add("GET", "/v1/characters", Access::kRead,
-             [&service](Request& request, Response& response) {
-               auto list = service.ListCharacters();
+             [&characters](Request& request, Response& response) {
+               auto list = characters.List();
                if (!list.ok()) return Fail(request, response, list.error());
                response.SetJson(200, Dump(json{{"characters", list.value()}}));
              });
   router.Add("GET", "/v1/characters/{id}", Access::kRead,
-             [&service](Request& request, Response& response) {
-               auto character = service.GetCharacter(request.path_params[0]);
+             [&characters](Request& request, Response& response) {
+               auto character = characters.Get(request.path_params[0]);
                if (!character.ok()) return Fail(request, response, character.error());
                response.SetJson(200, Dump(json(character.value())));
              });
   router.Add("DELETE", "/v1/characters/{id}", Access::kWrite,
-             [&service](Request& request, Response& response) {
-               auto deleted = service.DeleteCharacter(request.path_params[0]);
+             [&characters](Request& request, Response& response) {
+               auto deleted = characters.Delete(request.path_params[0]);
                if (!deleted.ok()) return Fail(request, response, deleted.error());
                response.status = 204;
              });
   router.Add("GET", "/v1/characters/{id}/motions", Access::kRead,
-             [&service](Request& request, Response& response) {
-               auto list = service.ListMotions(request.path_params[0]);
+             [&motions](Request& request, Response& response) {
+               auto list = motions.List(request.path_params[0]);
                if (!list.ok()) return Fail(request, response, list.error());
                response.SetJson(200, Dump(json{{"motions", list.value()}}));
              });
@@ -482,7 +487,7 @@ http::Router MakeRouter(const RouteContext& context) {
   // Motions.
   router.Add(
       "POST", "/v1/motions", Access::kWrite,
-      [&service, &config, context](Request& request, Response& response) {
+      [&motions, &config, context](Request& request, Response& response) {
         const auto character = request.Query("character");
         if (!character) {
           return http::SetProblem(request, response, 400,
@@ -491,20 +496,20 @@ http::Router MakeRouter(const RouteContext& context) {
         const std::string character_id(*character);
         std::vector<io::SourceFile> files;
         if (!ReadUpload(request, response, config, context.open_uploads, files)) return;
-        auto uploaded = service.UploadMotion(character_id, std::move(files));
+        auto uploaded = motions.Upload(character_id, std::move(files));
         if (!uploaded.ok()) return Fail(request, response, uploaded.error());
         response.SetJson(uploaded->created ? 201 : 200, Dump(json{{"motions", uploaded->value}}));
       });
   router.Add("GET", "/v1/motions/{id}", Access::kRead,
-             [&service](Request& request, Response& response) {
-               auto motion = service.GetMotion(request.path_params[0]);
+             [&motions](Request& request, Response& response) {
+               auto motion = motions.Get(request.path_params[0]);
                if (!motion.ok()) return Fail(request, response, motion.error());
                response.SetJson(200, Dump(json(motion.value())));
              });
 
   // Bakes.
   router.Add("POST", "/v1/bakes", Access::kWrite,
-             [&service, &config](Request& request, Response& response) {
+             [&bakes, &config](Request& request, Response& response) {
                const std::string type = Lower(request.Header("content-type").value_or(""));
                if (type != "application/json" && type.rfind("application/json;", 0) != 0) {
                  return http::SetProblem(request, response, 415,
@@ -521,37 +526,37 @@ http::Router MakeRouter(const RouteContext& context) {
                auto parsed = api::ParseBakeRequest(std::get<http::Body>(body).bytes);
                if (!parsed.ok())
                  return http::SetProblem(request, response, 400, parsed.status().message());
-               auto submitted = service.SubmitBake(*parsed);
+               auto submitted = bakes.Submit(*parsed);
                if (!submitted.ok()) return Fail(request, response, submitted.error());
                response.SetJson(submitted->created ? 202 : 200, Dump(json(submitted->value)));
                response.SetHeader("Location", "/v1/jobs/" + submitted->value.id);
              });
-  router.Add("GET", "/v1/bakes", Access::kRead, [&service](Request& request, Response& response) {
-    auto list = service.ListBakes(std::string(request.Query("character").value_or("")));
+  router.Add("GET", "/v1/bakes", Access::kRead, [&bakes](Request& request, Response& response) {
+    auto list = bakes.List(std::string(request.Query("character").value_or("")));
     if (!list.ok()) return Fail(request, response, list.error());
     response.SetJson(200, Dump(json{{"bakes", list.value()}}));
   });
   router.Add("GET", "/v1/bakes/{id}", Access::kRead,
-             [&service](Request& request, Response& response) {
-               auto bake = service.GetBake(request.path_params[0]);
+             [&bakes](Request& request, Response& response) {
+               auto bake = bakes.Get(request.path_params[0]);
                if (!bake.ok()) return Fail(request, response, bake.error());
                response.SetJson(200, Dump(json(bake.value())));
              });
   router.Add("DELETE", "/v1/bakes/{id}", Access::kWrite,
-             [&service](Request& request, Response& response) {
-               auto deleted = service.DeleteBake(request.path_params[0]);
+             [&bakes](Request& request, Response& response) {
+               auto deleted = bakes.Delete(request.path_params[0]);
                if (!deleted.ok()) return Fail(request, response, deleted.error());
                response.status = 204;
              });
   router.Add("GET", "/v1/bakes/{id}/report", Access::kRead,
-             [&service](Request& request, Response& response) {
-               auto report = service.GetReport(request.path_params[0]);
+             [&bakes](Request& request, Response& response) {
+               auto report = bakes.GetReport(request.path_params[0]);
                if (!report.ok()) return Fail(request, response, report.error());
                response.SetJson(200, report.value());
                response.SetHeader("Cache-Control", "public, max-age=3600");
              });
   router.Add("GET", "/v1/bakes/{id}/level", Access::kRead,
-             [&service](Request& request, Response& response) {
+             [&levels](Request& request, Response& response) {
                const auto px_text = request.Query("px");
                if (!px_text) {
                  return http::SetProblem(request, response, 400,
@@ -568,7 +573,7 @@ http::Router MakeRouter(const RouteContext& context) {
                                            "budget must be a number (pixels)");
                  budget = *parsed;
                }
-               auto choice = service.ChooseLevel(request.path_params[0], *px, budget);
+               auto choice = levels.Choose(request.path_params[0], *px, budget);
                if (!choice.ok()) return Fail(request, response, choice.error());
                response.SetHeader("Vary", "Accept");
                // A bake id names its content, so the choice for (bake, px, budget) never changes.
@@ -584,7 +589,7 @@ http::Router MakeRouter(const RouteContext& context) {
   // One level as glTF 2.0 binary (docs/EXPORT.md): the route the web viewer loads.
   router.Add(
       "GET", "/v1/bakes/{id}/levels/{file}", Access::kRead,
-      [&service](Request& request, Response& response) {
+      [&levels](Request& request, Response& response) {
         constexpr std::string_view kSuffix = ".glb";
         const std::string_view file = request.path_params[1];
         const std::optional<uint64_t> joints =
@@ -595,7 +600,7 @@ http::Router MakeRouter(const RouteContext& context) {
               request, response, 404,
               "a level is exported as /v1/bakes/{id}/levels/{joints}.glb, joints its kept count");
         }
-        auto gltf = service.GetLevelGltf(request.path_params[0], static_cast<int>(*joints));
+        auto gltf = levels.GetGltf(request.path_params[0], static_cast<int>(*joints));
         if (!gltf.ok()) return Fail(request, response, gltf.error());
         const std::string etag = "\"" + gltf->key + "\"";
         response.SetHeader("ETag", etag);
@@ -614,9 +619,9 @@ http::Router MakeRouter(const RouteContext& context) {
 
   // Jobs.
   router.Add("GET", "/v1/jobs/{id}", Access::kRead,
-             [&service, &config, context](Request& request, Response& response) {
+             [&jobs, &config, context](Request& request, Response& response) {
                const std::string& id = request.path_params[0];
-               auto status = service.GetJob(id);
+               auto status = jobs.Get(id);
                if (!status.ok()) return Fail(request, response, status.error());
                response.SetHeader("Cache-Control", "no-store");
                const auto wait_text = request.Query("wait");
@@ -636,19 +641,19 @@ http::Router MakeRouter(const RouteContext& context) {
                }
                StreamSlot slot(context.open_streams, config.max_streams);
                if (!slot.acquired()) return RefuseStream(request, response, config.max_streams);
-               auto waited = service.WaitJob(id, after, std::min(*wait, config.max_wait_seconds));
+               auto waited = jobs.Wait(id, after, std::min(*wait, config.max_wait_seconds));
                if (!waited.ok()) return Fail(request, response, waited.error());
                response.SetJson(200, Dump(json(waited.value())));
              });
   router.Add(
       "GET", "/v1/jobs/{id}/events", Access::kRead,
-      [&service, &config, context](Request& request, Response& response) {
-        auto status = service.GetJob(request.path_params[0]);
+      [&jobs, &config, context](Request& request, Response& response) {
+        auto status = jobs.Get(request.path_params[0]);
         if (!status.ok()) return Fail(request, response, status.error());
         auto slot = std::make_shared<StreamSlot>(context.open_streams, config.max_streams);
         if (!slot->acquired()) return RefuseStream(request, response, config.max_streams);
         auto state = std::make_shared<EventStream>();
-        state->service = &service;
+        state->jobs = &jobs;
         state->id = request.path_params[0];
         state->deadline =
             std::chrono::steady_clock::now() +
@@ -664,7 +669,7 @@ http::Router MakeRouter(const RouteContext& context) {
   // Levels.
   router.Add(
       "GET", "/v1/levels/{hash}", Access::kRead,
-      [&service](Request& request, Response& response) { ServeLevel(service, request, response); });
+      [&levels](Request& request, Response& response) { ServeLevel(levels, request, response); });
 
   AddWebRoutes(router, context.web);
   return router;

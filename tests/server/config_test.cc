@@ -139,7 +139,7 @@ TEST(Config, InvalidValuesAreRefusedWithTheOptionNamed) {
   EXPECT_NE(missing.status().message().find("/nonexistent/motionlodd.toml"), std::string::npos);
 }
 
-// MOTIONLOD_SIMD picks the hot loops' machine version (base/simd.h): a misspelt value stops
+// MOTIONLOD_SIMD picks the hot loops' machine version (core/simd.h): a misspelt value stops
 // the daemon before it listens, naming the variable; "baseline" starts it, and its start-up
 // line says which version runs.
 TEST(Config, AnUnknownSimdSettingStopsTheDaemonAndTheVersionIsLogged) {

@@ -1,0 +1,187 @@
+#include "server/levels.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "proto/level_selection.h"
+#include "io/sha256.h"
+#include "pipeline/export.h"
+
+namespace motionlod::server {
+namespace {
+
+namespace api = proto::api;
+using nlohmann::json;
+
+constexpr size_t kLevelTableEntries = 4096;
+
+}  // namespace
+
+StatusOr<std::shared_ptr<const Levels::Table>> Levels::GetTable(const BakeRecord& bake) {
+  {
+    std::lock_guard lock(tables_mutex_);
+    if (auto found = tables_.find(bake.id); found != tables_.end()) return found->second;
+  }
+  auto levels = context_.store->GetLevels(bake.id);
+  if (!levels.ok()) return levels.status();
+  const json report = json::parse(bake.report_json, nullptr, false);
+  if (!report.is_object() || !report.contains("levels") || !report["levels"].is_array() ||
+      report["levels"].size() != levels->size()) {
+    return Status(StatusCode::kDataLoss,
+                  "the stored report of bake " + bake.id + " does not match its levels");
+  }
+  auto table = std::make_shared<Table>();
+  const size_t count = levels->size();
+  std::vector<double> limits(count);
+  for (size_t l = 0; l < count; ++l) {
+    const json& level = report["levels"][l];
+    const double pct = level.value("max_vertex_error_pct", 0.0);
+    table->max_error_fraction.push_back(pct / 100.0);
+    limits[l] = proto::MaxPixelHeightForBudget(pct / 100.0, 1.0);
+    api::LevelEntry entry;
+    entry.index = static_cast<int>(l);
+    entry.joints = (*levels)[l].joints;
+    entry.max_vertex_error_pct = pct;
+    entry.mean_vertex_error_pct = level.value("mean_vertex_error_pct", 0.0);
+    entry.mean_normal_error_deg = level.value("mean_normal_error_deg", 0.0);
+    entry.mean_e = level.value("mean_E", 0.0);
+    if (std::isfinite(limits[l])) entry.max_px_for_1px_error = limits[l];
+    entry.hash = (*levels)[l].hash;
+    entry.bytes = static_cast<uint64_t>((*levels)[l].bytes);
+    table->entries.push_back(std::move(entry));
+  }
+  // proto::SelectLevel picks the coarsest level l with err_l * px <= budget, the finest
+  // when none: level l > 0 serves (max_{k>l} limit_k, limit_l], level 0 everything above
+  // the coarser levels' limits.
+  for (size_t l = 0; l < count; ++l) {
+    double lower = 0;
+    for (size_t k = l + 1; k < count; ++k) lower = std::max(lower, limits[k]);
+    api::LevelEntry& entry = table->entries[l];
+    entry.px_min = lower;
+    if (l == 0) {
+      entry.chosen = true;
+    } else {
+      entry.chosen = lower < limits[l];
+      if (std::isfinite(limits[l])) entry.px_max = limits[l];
+    }
+  }
+  std::lock_guard lock(tables_mutex_);
+  if (tables_.size() >= kLevelTableEntries) tables_.clear();
+  tables_[bake.id] = table;
+  return std::shared_ptr<const Table>(table);
+}
+
+void Levels::ForgetTable(const std::string& bake_id) {
+  std::lock_guard lock(tables_mutex_);
+  tables_.erase(bake_id);
+}
+
+Result<api::LevelChoice> Levels::Choose(const std::string& bake_id, double px, double budget_px) {
+  if (!api::IsContentId(bake_id)) return MalformedId("bake");
+  if (!(px > 0) || !std::isfinite(px) || px > 1e6) {
+    return Error(ErrorKind::kBadRequest,
+                 "px (the character's on-screen height in pixels) must be in (0, 1e6]");
+  }
+  if (!(budget_px > 0) || !std::isfinite(budget_px) || budget_px > 1e4) {
+    return Error(ErrorKind::kBadRequest,
+                 "budget (the tolerated error in pixels) must be in (0, 1e4]");
+  }
+  std::shared_ptr<const Table> table;
+  {
+    std::lock_guard lock(tables_mutex_);
+    if (auto found = tables_.find(bake_id); found != tables_.end()) table = found->second;
+  }
+  if (!table) {
+    auto bake = BakeWithLevels(bake_id);
+    if (!bake.ok()) return bake.error();
+    auto loaded = GetTable(bake.value());
+    if (!loaded.ok()) return Internal(loaded.status());
+    table = *loaded;
+  }
+  const int l = proto::SelectLevel(table->max_error_fraction, px, budget_px);
+  const api::LevelEntry& entry = table->entries[static_cast<size_t>(l)];
+  api::LevelChoice choice;
+  choice.bake = bake_id;
+  choice.px = px;
+  choice.budget_px = budget_px;
+  choice.index = l;
+  choice.joints = entry.joints;
+  choice.max_vertex_error_pct = entry.max_vertex_error_pct;
+  choice.error_px = px * entry.max_vertex_error_pct / 100.0;
+  choice.within_budget = choice.error_px <= budget_px;
+  choice.hash = entry.hash;
+  choice.url = "/v1/levels/" + entry.hash;
+  choice.bytes = entry.bytes;
+  return choice;
+}
+
+Result<LevelCache::Bytes> Levels::Get(const std::string& hash) {
+  if (!api::IsContentId(hash))
+    return Error(ErrorKind::kNotFound, "no level with that hash (hashes are 64 hex digits)");
+  if (LevelCache::Bytes bytes = context_.cache.Get(hash)) return bytes;
+  auto size = context_.store->LevelBytes(hash);
+  if (!size.ok()) return Internal(size.status());
+  if (!size->has_value()) return Error(ErrorKind::kNotFound, "no level " + hash);
+  auto bytes = context_.blobs->Get(hash);
+  if (!bytes.ok()) {
+    if (bytes.status().code() == StatusCode::kNotFound)
+      return Error(ErrorKind::kNotFound, "no level " + hash);
+    return Internal(bytes.status());
+  }
+  auto shared = std::make_shared<const std::string>(std::move(*bytes));
+  context_.cache.Put(hash, shared);
+  return LevelCache::Bytes(shared);
+}
+
+Result<BakeRecord> Levels::BakeWithLevels(const std::string& bake_id) {
+  auto bake = FindRecord(*context_.store, &Store::GetBake, "bake", bake_id);
+  if (!bake.ok()) return bake.error();
+  if (bake->level_set.empty()) {
+    auto job = jobs_.Get(bake_id);
+    return Error(ErrorKind::kConflict, "bake " + bake_id + " has no levels yet (state: " +
+                                           (job.ok() ? job->state : std::string("unknown")) +
+                                           "); wait on /v1/jobs/" + bake_id);
+  }
+  return bake;
+}
+
+Result<Levels::GltfFile> Levels::GetGltf(const std::string& bake_id, int joints) {
+  auto bake = BakeWithLevels(bake_id);
+  if (!bake.ok()) return bake.error();
+  auto levels = context_.store->GetLevels(bake_id);
+  if (!levels.ok()) return Internal(levels.status());
+  const LevelRecord* level = nullptr;
+  std::string available;
+  for (const LevelRecord& record : *levels) {
+    if (record.joints == joints) level = &record;
+    available += (available.empty() ? "" : ", ") + std::to_string(record.joints);
+  }
+  if (level == nullptr) {
+    return Error(ErrorKind::kNotFound, "bake " + bake_id + " has no level with " +
+                                           std::to_string(joints) + " joints; its levels keep " +
+                                           available);
+  }
+  auto motion = context_.store->GetMotion(bake->motion_id);
+  if (!motion.ok()) return Internal(motion.status());
+  const std::string animation = motion->has_value() ? (*motion)->animation : std::string();
+  GltfFile file;
+  // The version after "motionlod-gltf/" changes whenever the exporter writes other bytes.
+  file.key =
+      io::Sha256Hex("motionlod-gltf/1\nlevel " + level->hash + "\ncharacter " + bake->character_id +
+                    "\nanimation " + std::to_string(animation.size()) + ":" + animation + "\n");
+  if ((file.glb = context_.cache.Get(file.key))) return file;
+  auto one_level = Get(level->hash);
+  if (!one_level.ok()) return one_level.error();
+  auto character =
+      FindRecord(*context_.store, &Store::GetCharacter, "character", bake->character_id);
+  if (!character.ok()) return character.error();
+  auto asset = context_.LoadSource(character->id, character->files);
+  if (!asset.ok()) return Internal(asset.status());
+  auto exported = pipeline::ExportLevelGltf(**asset, *one_level.value(), joints, animation);
+  if (!exported.ok()) return Internal(exported.status());
+  file.glb = std::make_shared<const std::string>(std::move(exported->glb));
+  context_.cache.Put(file.key, file.glb);
+  return file;
+}
+
+}  // namespace motionlod::server

@@ -1,0 +1,58 @@
+// Levels of baked level sets: a bake's level table (error figures and the on-screen
+// heights each level serves), the level core::SelectLevel picks for a height, the
+// one-level files by hash, and a level exported as glTF.
+#pragma once
+
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "proto/api.h"
+#include "server/jobs.h"
+#include "server/level_cache.h"
+#include "server/service_context.h"
+#include "server/store.h"
+
+namespace motionlod::server {
+
+class Levels {
+ public:
+  Levels(ServiceContext& context, Jobs& jobs) : context_(context), jobs_(jobs) {}
+
+  // core::SelectLevel on the bake's level table for a character `px` pixels tall.
+  Result<proto::api::LevelChoice> Choose(const std::string& bake_id, double px, double budget_px);
+  // The one-level file of that hash (served from the cache when hot).
+  Result<LevelCache::Bytes> Get(const std::string& hash);
+
+  // The level of a bake that keeps `joints` joints as glTF 2.0 binary (docs/EXPORT.md),
+  // exported from the stored character on the first request and then served from the
+  // level cache under `key`, the SHA-256 of what it is made of (an ETag).
+  struct GltfFile {
+    LevelCache::Bytes glb;
+    std::string key;
+  };
+  Result<GltfFile> GetGltf(const std::string& bake_id, int joints);
+
+  struct Table {
+    std::vector<double> max_error_fraction;  // finest first
+    std::vector<proto::api::LevelEntry> entries;
+  };
+  // The level table of a bake that has levels, made from its report once and then cached.
+  StatusOr<std::shared_ptr<const Table>> GetTable(const BakeRecord& bake);
+  // Drops the cached table of a deleted bake.
+  void ForgetTable(const std::string& bake_id);
+
+ private:
+  // The bake record of a bake that has levels (an id checked first; 404, or 409 while its
+  // job has not succeeded).
+  Result<BakeRecord> BakeWithLevels(const std::string& bake_id);
+
+  ServiceContext& context_;
+  Jobs& jobs_;
+  std::mutex tables_mutex_;
+  std::map<std::string, std::shared_ptr<const Table>> tables_;
+};
+
+}  // namespace motionlod::server
