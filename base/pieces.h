@@ -1,4 +1,4 @@
-// How the layers that start no thread (core, proto) spread independent pieces of their
+// How the layers that start no thread (core, io, proto) spread independent pieces of their
 // work over a caller's threads.
 #pragma once
 
@@ -8,8 +8,8 @@ namespace motionlod {
 
 // run(count, piece) calls piece(index) once for every index in [0, count), in any order and
 // on any threads, and returns when all have run. A caller with threads passes its pool's
-// Run (base/parallel.h); an empty runner runs the pieces in order on the calling thread.
-// A function that takes one returns the same result for any runner.
+// (pipeline/task_pool.h: TaskPool::Runner); an empty runner runs the pieces in order on the
+// calling thread. A function that takes one returns the same result for any runner.
 using PieceRunner = std::function<void(int count, const std::function<void(int)>& piece)>;
 
 inline void RunPieces(const PieceRunner& run, int count, const std::function<void(int)>& piece) {

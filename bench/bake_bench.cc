@@ -69,6 +69,7 @@
 #include "pipeline/allocator.h"
 #include "pipeline/bake.h"
 #include "pipeline/report.h"
+#include "pipeline/task_pool.h"
 #include "proto/level_format.h"
 
 namespace motionlod::bench {
@@ -248,7 +249,7 @@ StatusOr<Stages> BakeEveryLevel(const core::RawCharacter& raw, const io::Asset& 
                                 int threads) {
   Stages stages;
   auto begin = Clock::now();
-  TaskPool pool(threads);
+  pipeline::TaskPool pool(threads);
   // The character and the motion side by side, as pipeline::Bake builds them.
   std::optional<StatusOr<std::shared_ptr<const core::Character>>> built;
   std::optional<StatusOr<core::Motion>> sampled;
@@ -256,7 +257,7 @@ StatusOr<Stages> BakeEveryLevel(const core::RawCharacter& raw, const io::Asset& 
     if (task == 0) {
       built = core::BuildCharacter(raw, pool.Runner());
     } else {
-      sampled = motion_source.SampleAnimation(animation, 0, &pool);
+      sampled = motion_source.SampleAnimation(animation, 0, pool.Runner());
     }
   });
   auto character = *std::move(built);

@@ -79,7 +79,8 @@ bool Asset::has_proxy_skin() const { return impl_->rig.proxy_skin; }
 const std::vector<AnimationInfo>& Asset::animations() const { return impl_->infos; }
 const std::vector<std::string>& Asset::warnings() const { return impl_->warnings; }
 
-StatusOr<core::Motion> Asset::SampleAnimation(std::string_view name, double fps, TaskPool* pool) const {
+StatusOr<core::Motion> Asset::SampleAnimation(std::string_view name, double fps,
+                                              const PieceRunner& run) const {
   if (impl_->clips.empty()) {
     return NotFound(Quote(impl_->rig.character.name) + " has no animation");
   }
@@ -112,7 +113,7 @@ StatusOr<core::Motion> Asset::SampleAnimation(std::string_view name, double fps,
                            std::to_string(kMaxFrames) + " frames or " +
                            std::to_string(kMaxMatrices) + " matrices");
   }
-  SampledClip sampled = SampleClip(*clip, impl_->nodes, impl_->rig.joint_nodes, fps, pool);
+  SampledClip sampled = SampleClip(*clip, impl_->nodes, impl_->rig.joint_nodes, fps, run);
   // Corrupted transforms (a zero scale in a rest matrix, say) must not reach the caller
   // as a motion that core::ValidateMotion would reject.
   const size_t bad = sampled.first_non_invertible;

@@ -30,13 +30,10 @@
 #include <string_view>
 #include <vector>
 
+#include "base/pieces.h"
 #include "base/status.h"
 #include "core/character.h"
 #include "core/motion.h"
-
-namespace motionlod {
-class TaskPool;  // base/parallel.h
-}  // namespace motionlod
 
 namespace motionlod::io {
 
@@ -87,10 +84,10 @@ class Asset {
   // animation of that name: the message lists the available ones), InvalidArgument
   // (fps negative, not finite or above 1000, a result of more than 1e6 frames or 1e7
   // joint matrices, or a joint matrix that is singular or not finite), so that a
-  // returned motion always passes core::ValidateMotion. The frames are split over
-  // `pool`'s threads (none: the calling thread); the motion does not depend on how many.
+  // returned motion always passes core::ValidateMotion. The frames are sampled in pieces
+  // on `run` (base/pieces.h; empty: on the calling thread); the motion is the same.
   StatusOr<core::Motion> SampleAnimation(std::string_view name, double fps,
-                                         TaskPool* pool = nullptr) const;
+                                         const PieceRunner& run = {}) const;
 
   struct Impl;
 

@@ -8,7 +8,6 @@
 #include <set>
 #include <utility>
 
-#include "base/parallel.h"
 #include "io/text.h"
 
 namespace motionlod::io {
@@ -375,7 +374,7 @@ void PoseSampler::Evaluate(const Clip* clip, double seconds, core::Affine34d* jo
 }
 
 SampledClip SampleClip(const Clip& clip, const std::vector<SceneNode>& nodes,
-                       const std::vector<int>& joint_nodes, double fps, TaskPool* pool) {
+                       const std::vector<int>& joint_nodes, double fps, const PieceRunner& run) {
   SampledClip sampled;
   core::Motion& motion = sampled.motion;
   motion.name = clip.info.name;
@@ -383,13 +382,12 @@ SampledClip SampleClip(const Clip& clip, const std::vector<SceneNode>& nodes,
   motion.frame_count = FrameCount(clip.info.duration_seconds, fps);
   motion.joint_count = static_cast<int>(joint_nodes.size());
   motion.joint_world.resize(static_cast<size_t>(motion.frame_count) * joint_nodes.size());
-  // Contiguous frame ranges, one sampler each. On several threads, a few ranges per thread:
-  // a thread that comes late (from the character's build, beside this in a bake) still
-  // takes a share.
-  constexpr int kRangesPerThread = 4;
-  const int threads = pool != nullptr ? pool->threads() : 1;
+  // Contiguous frame ranges, one sampler each. With a runner, short ranges: a thread that
+  // comes late (from the character's build, beside this in a bake) still takes a share,
+  // and a range's own setup (its sampler, its key cursors) is a small part of its frames.
+  constexpr int kFramesPerRange = 16;
   const int ranges =
-      std::max(1, std::min(threads > 1 ? kRangesPerThread * threads : 1, motion.frame_count));
+      run ? std::max(1, (motion.frame_count + kFramesPerRange - 1) / kFramesPerRange) : 1;
   // Per range, the index in joint_world of its first rejected matrix, or joint_world.size().
   std::vector<size_t> first_bad(ranges);
   const auto sample_range = [&](int w) {
@@ -408,11 +406,7 @@ SampledClip SampleClip(const Clip& clip, const std::vector<SceneNode>& nodes,
     first_bad[w] = bad < range.size() ? static_cast<size_t>(begin) * joint_nodes.size() + bad
                                       : motion.joint_world.size();
   };
-  if (pool != nullptr) {
-    pool->Run(ranges, sample_range);
-  } else {
-    sample_range(0);
-  }
+  RunPieces(run, ranges, sample_range);
   sampled.first_non_invertible = *std::min_element(first_bad.begin(), first_bad.end());
   return sampled;
 }

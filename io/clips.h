@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "base/pieces.h"
 #include "base/status.h"
 #include "core/motion.h"
 #include "io/asset.h"
@@ -76,12 +77,12 @@ struct SampledClip {
   size_t first_non_invertible = 0;
 };
 
-// Samples `clip` at `fps` (> 0) into a Motion over `joint_nodes`, its frames split over
-// `pool`'s threads, or none (each frame is sampled on its own: the result does not depend
-// on it). Each range of frames checks its matrices as it samples them, while they are in
-// this core's cache (a serial check after the pieces was a tenth of a short clip's
-// sampling on two threads).
+// Samples `clip` at `fps` (> 0) into a Motion over `joint_nodes`, in pieces of
+// contiguous frames on `run` (base/pieces.h), or in one on the calling thread when `run` is
+// empty (each frame is sampled on its own: the result is the same). Each range of frames
+// checks its matrices as it samples them, while they are in this core's cache (a serial
+// check after the pieces was a tenth of a short clip's sampling on two threads).
 SampledClip SampleClip(const Clip& clip, const std::vector<SceneNode>& nodes,
-                       const std::vector<int>& joint_nodes, double fps, TaskPool* pool);
+                       const std::vector<int>& joint_nodes, double fps, const PieceRunner& run);
 
 }  // namespace motionlod::io

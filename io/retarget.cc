@@ -203,8 +203,8 @@ StatusOr<RetargetedMotion> RetargetMotion(const core::RawSkeleton& source,
 
 StatusOr<RetargetedMotion> RetargetAnimation(const Asset& source, std::string_view animation,
                                              double fps, const core::RawCharacter& target,
-                                             TaskPool* pool) {
-  StatusOr<core::Motion> motion = source.SampleAnimation(animation, fps, pool);
+                                             const PieceRunner& run) {
+  StatusOr<core::Motion> motion = source.SampleAnimation(animation, fps, run);
   if (!motion.ok()) return motion.status();
   return RetargetMotion(source.character().skeleton, *motion, target.skeleton);
 }

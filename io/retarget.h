@@ -27,6 +27,7 @@
 #include <string_view>
 #include <vector>
 
+#include "base/pieces.h"
 #include "base/status.h"
 #include "core/character.h"
 #include "core/motion.h"
@@ -49,10 +50,10 @@ std::string NormalizeJointName(std::string_view name);
 // retargets it onto `target`'s skeleton (only the skeleton is used). Errors: those of
 // Asset::SampleAnimation; InvalidArgument for an invalid target skeleton, or when fewer
 // than half of the target's joints match (the message names the unmatched ones).
-// `pool`: as for Asset::SampleAnimation.
+// `run`: as for Asset::SampleAnimation.
 StatusOr<RetargetedMotion> RetargetAnimation(const Asset& source, std::string_view animation,
                                              double fps, const core::RawCharacter& target,
-                                             TaskPool* pool = nullptr);
+                                             const PieceRunner& run = {});
 
 // The same on an already sampled motion of `source_skeleton`.
 StatusOr<RetargetedMotion> RetargetMotion(const core::RawSkeleton& source_skeleton,

@@ -14,8 +14,8 @@
 #include "core/smallest_level.h"
 #include "core/skinning.h"
 #include "io/retarget.h"
-#include "base/parallel.h"
 #include "pipeline/report.h"
+#include "pipeline/task_pool.h"
 #include "proto/level_format.h"
 
 namespace motionlod::pipeline {
@@ -174,7 +174,7 @@ StatusOr<BakeInputs> PrepareInputsOn(const BakeRequest& request, TaskPool& pool)
       character = core::BuildCharacter(character_asset.character(), pool.Runner());
     } else if (request.motion) {
       auto retargeted = io::RetargetAnimation(*request.motion, request.animation, request.fps,
-                                              character_asset.character(), &pool);
+                                              character_asset.character(), pool.Runner());
       if (!retargeted.ok()) {
         motion_status = retargeted.status();
         return;
@@ -187,7 +187,7 @@ StatusOr<BakeInputs> PrepareInputsOn(const BakeRequest& request, TaskPool& pool)
         motion_warnings.push_back("the motion's joint '" + name + "' matches no joint of the character");
       }
     } else {
-      auto motion = character_asset.SampleAnimation(request.animation, request.fps, &pool);
+      auto motion = character_asset.SampleAnimation(request.animation, request.fps, pool.Runner());
       if (!motion.ok()) {
         motion_status = motion.status();
         return;

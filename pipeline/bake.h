@@ -14,7 +14,6 @@
 
 #include <nlohmann/json.hpp>
 
-#include "base/parallel.h"
 #include "base/status.h"
 #include "core/character.h"
 #include "core/motion.h"
@@ -22,6 +21,7 @@
 #include "core/simd.h"
 #include "core/solve_levels.h"
 #include "io/asset.h"
+#include "pipeline/task_pool.h"
 
 namespace motionlod::pipeline {
 

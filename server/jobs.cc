@@ -6,7 +6,7 @@
 #include <chrono>
 #include <thread>
 
-#include "base/parallel.h"
+#include "pipeline/task_pool.h"
 #include "proto/level_format.h"
 #include "server/bakes.h"
 
@@ -30,7 +30,7 @@ Status Jobs::Start() {
     }
   }
   const Config& config = context_.config;
-  const int workers = config.threads > 0 ? config.threads : ResolveThreads(0);
+  const int workers = config.threads > 0 ? config.threads : pipeline::ResolveThreads(0);
   queue_ = std::make_unique<JobQueue>(
       static_cast<size_t>(config.queue_capacity), workers, [this](const std::string& id) {
         try {
@@ -53,7 +53,7 @@ Status Jobs::Start() {
   for (const std::string& id : *unfinished) queue_->Push(id, /*force=*/true);
   if (!unfinished->empty()) spdlog::info("requeued {} unfinished jobs", unfinished->size());
   spdlog::info("{} bake workers, {} threads per bake, queue capacity {}", workers,
-               config.bake_threads == 0 ? ResolveThreads(0) : config.bake_threads,
+               config.bake_threads == 0 ? pipeline::ResolveThreads(0) : config.bake_threads,
                config.queue_capacity);
   return Status::Ok();
 }

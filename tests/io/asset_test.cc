@@ -7,7 +7,6 @@
 #include <cmath>
 #include <numbers>
 
-#include "base/parallel.h"
 #include "core/character.h"
 #include "core/motion.h"
 #include "gltf_fixture.h"
@@ -183,8 +182,7 @@ TEST(SampleAnimation, ThreadsSplitTheFramesWithoutChangingThem) {
     const auto asset = DataAsset(file);
     const core::Motion one = *asset->SampleAnimation("", 0);
     for (int threads : {2, 3, 7}) {
-      TaskPool pool(threads);
-      const core::Motion split = *asset->SampleAnimation("", 0, &pool);
+      const core::Motion split = *asset->SampleAnimation("", 0, testing::ThreadRunner(threads));
       ASSERT_EQ(split.frame_count, one.frame_count) << file;
       ASSERT_EQ(split.joint_world.size(), one.joint_world.size()) << file;
       for (size_t q = 0; q < one.joint_world.size(); ++q) {

@@ -6,7 +6,7 @@
 #include <limits>
 #include <numbers>
 
-#include "base/parallel.h"
+#include "test_util.h"
 
 namespace motionlod::io {
 namespace {
@@ -330,7 +330,7 @@ TEST(BuildClips, RaisesZeroScalesSoMatricesStayInvertible) {
 // Two joints, the second animated over 40 s with a zero scale keyed at 30 s and 35 s
 // (a clip BuildClips would have raised: SampleClip checks what it samples whatever its
 // source), sampled at 1 fps: the first singular matrix is frame 30's second joint, in a
-// late range of frames on several threads.
+// later range of frames than the first, on several threads.
 TEST(SampleClip, FindsTheFirstSingularMatrixInAnyRangeOfFrames) {
   std::vector<SceneNode> nodes(2);
   for (SceneNode& node : nodes) {
@@ -347,12 +347,11 @@ TEST(SampleClip, FindsTheFirstSingularMatrixInAnyRangeOfFrames) {
     track.scaling_times.push_back(second);
     track.scalings.push_back(second == 30 || second == 35 ? Vector3d::Zero() : Vector3d::Ones());
   }
-  const SampledClip alone = SampleClip(clip, nodes, {0, 1}, 1, nullptr);
+  const SampledClip alone = SampleClip(clip, nodes, {0, 1}, 1, {});
   ASSERT_EQ(alone.motion.frame_count, 41);
   EXPECT_EQ(alone.first_non_invertible, 30u * 2 + 1);
   for (int threads : {1, 2, 3}) {
-    TaskPool pool(threads);
-    const SampledClip sampled = SampleClip(clip, nodes, {0, 1}, 1, &pool);
+    const SampledClip sampled = SampleClip(clip, nodes, {0, 1}, 1, testing::ThreadRunner(threads));
     EXPECT_EQ(sampled.first_non_invertible, 30u * 2 + 1) << threads << " threads";
     for (size_t i = 0; i < alone.motion.joint_world.size(); ++i) {
       EXPECT_TRUE(sampled.motion.joint_world[i].isApprox(alone.motion.joint_world[i], 0))
@@ -360,7 +359,7 @@ TEST(SampleClip, FindsTheFirstSingularMatrixInAnyRangeOfFrames) {
     }
   }
   track.scalings[30] = track.scalings[35] = Vector3d::Ones();
-  const SampledClip clean = SampleClip(clip, nodes, {0, 1}, 1, nullptr);
+  const SampledClip clean = SampleClip(clip, nodes, {0, 1}, 1, {});
   EXPECT_EQ(clean.first_non_invertible, clean.motion.joint_world.size());
 }
 

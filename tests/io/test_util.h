@@ -5,13 +5,16 @@
 
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
+#include "base/pieces.h"
 #include "core/character.h"
 #include "core/motion.h"
 #include "io/asset.h"
@@ -32,6 +35,21 @@ inline std::string ReadBytes(const std::filesystem::path& path) {
   std::ostringstream buffer;
   buffer << in.rdbuf();
   return std::move(buffer).str();
+}
+
+// A PieceRunner on `threads` threads started for each call (io starts none of its own; the
+// pipeline's pool is one such runner): thread w runs pieces w, w + threads, ..., so that
+// pieces run at the same time and finish out of order.
+inline PieceRunner ThreadRunner(int threads) {
+  return [threads](int count, const std::function<void(int)>& piece) {
+    std::vector<std::thread> workers;
+    for (int w = 0; w < threads; ++w) {
+      workers.emplace_back([&piece, count, threads, w] {
+        for (int index = w; index < count; index += threads) piece(index);
+      });
+    }
+    for (std::thread& worker : workers) worker.join();
+  };
 }
 
 // Loads a data file (path relative to the data directory) once per test binary.

@@ -8,7 +8,6 @@
 #include <thread>
 #include <vector>
 
-#include "base/parallel.h"
 #include "core/character.h"
 #include "core/internal/skin_clusters.h"
 #include "core/rank_joints.h"
@@ -16,8 +15,9 @@
 #include "core/solve_levels.h"
 #include "io/asset.h"
 #include "pipeline/bake.h"
+#include "pipeline/task_pool.h"
 
-namespace motionlod {
+namespace motionlod::pipeline {
 namespace {
 
 // Waits up to 30 s for `condition`; whether it came true.
@@ -275,4 +275,4 @@ TEST(TaskPool, PreparesTheSameMotionAsOneThread) {
 }
 
 }  // namespace
-}  // namespace motionlod
+}  // namespace motionlod::pipeline

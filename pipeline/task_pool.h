@@ -1,6 +1,7 @@
-// The fork-join pool of the layers above the core (which starts no thread): a fixed set of
-// worker threads that run the pieces of Run calls, with the calling thread taking part.
-// Header-only: its users link Threads::Threads.
+// The fork-join pool of the pipeline and the programs above it (the core, io and proto
+// start no thread: they take a PieceRunner, base/pieces.h, which Runner() gives them): a
+// fixed set of worker threads that run the pieces of Run calls, with the calling thread
+// taking part. Header-only: its users link Threads::Threads.
 #pragma once
 
 #include <algorithm>
@@ -15,7 +16,7 @@
 
 #include "base/pieces.h"
 
-namespace motionlod {
+namespace motionlod::pipeline {
 
 inline int ResolveThreads(int threads) {
   if (threads > 0) return threads;
@@ -23,19 +24,18 @@ inline int ResolveThreads(int threads) {
   return hardware == 0 ? 1 : static_cast<int>(hardware);
 }
 
-// Why a pool and not a thread per piece: starting and joining two threads cost 70 us a call
-// on the 2-core machine the benchmarks run on (a sixth of a small character's bake, which
-// makes five such calls), and threads started from inside another piece while the other
-// core was still busy were all placed on one core and stayed there for milliseconds (the
-// motion's sampling, run beside the character's build, was no faster on 2 threads than on
-// 1).
+// Why a pool and not a thread per piece: a bake makes several parallel calls, and starting
+// and joining threads for each was a noticeable share of a small character's bake; threads
+// started from inside another piece while the other cores were busy were also placed on
+// one core and stayed there (the motion's sampling, beside the character's build, gained
+// nothing from a second thread).
 //
-// Why a thread waits by spinning first: a wake-up through the condition variable took 22 us
-// on that machine's virtual CPUs (a round trip between two threads, 45 us), and a bake makes
-// dozens of short Run calls: Fox's ladder was no faster on 2 threads than on 1. A thread
-// with nothing to do watches the pool's change count for kSpin before it sleeps, so that
-// the next job or the last piece's end reaches it in well under a microsecond; kSpin is
-// about two wake-ups, the most a spin can cost beyond what sleeping would have.
+// Why a thread waits by spinning first: a wake-up through the condition variable takes
+// tens of microseconds on virtual CPUs, and a bake makes dozens of short Run calls, so
+// sleeping between them ate what a second thread gained. A thread with nothing to do
+// watches the pool's change count for kSpin before it sleeps, so that the next job or the
+// last piece's end reaches it in well under a microsecond; kSpin is about two wake-ups,
+// the most a spin can cost beyond what sleeping would have.
 class TaskPool {
  public:
   // threads - 1 workers: the thread that calls Run is the last. 0 = one per hardware thread.
@@ -56,7 +56,8 @@ class TaskPool {
 
   int threads() const { return threads_; }
 
-  // Run as a PieceRunner, for the core's functions that take one (base/pieces.h).
+  // Run as a PieceRunner, for the functions of the core, io and proto that take one
+  // (base/pieces.h).
   PieceRunner Runner() {
     return [this](int count, const std::function<void(int)>& piece) { Run(count, piece); };
   }
@@ -182,4 +183,4 @@ class TaskPool {
   std::vector<std::thread> workers_;
 };
 
-}  // namespace motionlod
+}  // namespace motionlod::pipeline
