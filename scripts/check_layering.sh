@@ -1,43 +1,58 @@
 #!/usr/bin/env bash
-# Fails when a layer includes what STYLE.md keeps out of it (the arrows of the layers).
+# Fails when a layer includes what STYLE.md keeps out of it (the arrows of the layers):
+#   base      the standard library only: what every layer shares
+#   core      base and Eigen
+#   proto     base, JSON and xxHash: no Eigen, no core
+#   io        core and base, Assimp behind one file; starts no thread (takes a PieceRunner)
+#   pipeline  core, io, proto and base, and the thread pool
+#   tools     the pipeline and below; server: the same and HTTP
+#   client    proto and base only
 set -uo pipefail
 cd "$(dirname "$0")/.."
 status=0
 forbid() {  # forbid DIR REGEX WHY
   local hits
-  hits=$(grep -REn --include='*.h' --include='*.cc' "^#include [<\"]($2)" "$1" 2>/dev/null)
+  hits=$(grep -REn --include='*.h' --include='*.cc' --exclude-dir=node_modules \
+    "^#include [<\"]($2)" "$1" 2>/dev/null)
   if [ -n "$hits" ]; then
     echo "layering: $1 must not include $3:"
     echo "$hits"
     status=1
   fi
 }
-forbid core 'iostream|fstream|cstdio|stdio\.h|filesystem|thread|mutex|future|spdlog|nlohmann|httplib|assimp|io/|proto/|pipeline/|tools/|server/|client/' \
+# only_in FILE DIRS REGEX WHAT: REGEX may be included by FILE alone within DIRS.
+only_in() {
+  local found
+  found=$(grep -RlE --include='*.h' --include='*.cc' --exclude-dir=node_modules \
+    "^#include [<\"]($3)" $2 2>/dev/null | sort | tr '\n' ' ')
+  if [ -n "$found" ] && [ "$found" != "$1 " ]; then
+    echo "layering: only $1 may include $4, found: $found"
+    status=1
+  fi
+}
+higher='core/|io/|proto/|pipeline/|tools/|server/|client/'
+forbid base "Eigen|spdlog|nlohmann|httplib|assimp|xxhash|$higher" \
+  "anything but the standard library and base/"
+forbid core 'iostream|fstream|cstdio|stdio\.h|filesystem|thread|mutex|future|spdlog|nlohmann|httplib|assimp|xxhash|io/|proto/|pipeline/|tools/|server/|client/' \
   "I/O, threads, logging, JSON, HTTP, Assimp or a higher layer"
-forbid base 'Eigen|spdlog|nlohmann|httplib|assimp|core/|io/|proto/' "anything but the standard library"
-forbid proto 'Eigen|core/|io/|pipeline/|spdlog|httplib|assimp' "Eigen, core, io, logging, HTTP or Assimp"
-forbid io 'spdlog|httplib|pipeline/|tools/|server/|client/|proto/' "logging, HTTP or a higher layer"
+forbid proto 'Eigen|core/|io/|pipeline/|tools/|server/|client/|spdlog|httplib|assimp|base/(lanes|simd)\.h' \
+  "Eigen, the core, io, a higher layer, logging, HTTP, Assimp or the core's SIMD helpers"
+forbid io 'thread|future|condition_variable|spdlog|httplib|pipeline/|tools/|server/|client/|proto/|base/(lanes|simd)\.h' \
+  "threads (it takes a PieceRunner), logging, HTTP, a higher layer or the core's SIMD helpers"
 forbid pipeline 'spdlog|httplib|tools/|server/|client/' "logging, HTTP or a higher layer"
-# Assimp stays behind one file of io.
+forbid tools 'httplib|server/|client/' "HTTP, the server or the client"
+forbid server 'tools/|client/' "the tools or the client"
+# The thin client needs proto/ and base/ only.
+forbid client 'Eigen|core/|io/|pipeline/|tools/|server/|spdlog|assimp' \
+  "Eigen, the core, io, the pipeline, the tools, the server, logging or Assimp"
+# Third-party headers stay behind one file each.
 assimp_files=$(grep -RlE '^#include [<"]assimp/' io | sort | tr '\n' ' ')
 if [ "$assimp_files" != "io/assimp_scene.cc " ]; then
   echo "layering: only io/assimp_scene.cc may include Assimp, found: $assimp_files"
   status=1
 fi
-# cpp-httplib stays behind one file of the server.
-httplib_files=$(grep -RlE '^#include [<"]httplib\.h' server 2>/dev/null | sort | tr '\n' ' ')
-if [ -n "$httplib_files" ] && [ "$httplib_files" != "server/http_server.cc " ]; then
-  echo "layering: only server/http_server.cc may include httplib.h, found: $httplib_files"
-  status=1
-fi
-forbid server 'tools/|client/' "the tools or the client"
-# The thin client needs proto/ and base/ only, and keeps cpp-httplib behind one file.
-forbid client 'Eigen|core/|io/|pipeline/|tools/|server/|spdlog|assimp' \
-  "Eigen, the core, io, the pipeline, the tools, the server, logging or Assimp"
-client_httplib_files=$(grep -RlE '^#include [<"]httplib\.h' client 2>/dev/null | sort | tr '\n' ' ')
-if [ -n "$client_httplib_files" ] && [ "$client_httplib_files" != "client/http_connection.cc " ]; then
-  echo "layering: only client/http_connection.cc may include httplib.h, found: $client_httplib_files"
-  status=1
-fi
+only_in server/http_server.cc server 'httplib\.h' "httplib.h in the server"
+only_in client/http_connection.cc client 'httplib\.h' "httplib.h in the client"
+only_in proto/checksum.cc "base core proto io pipeline tools server client" 'xxhash\.h' "xxhash.h"
 [ $status -eq 0 ] && echo "layering: ok"
 exit $status
