@@ -54,7 +54,7 @@
 #include <string_view>
 #include <vector>
 
-#include "base/parallel.h"
+#include "pipeline/task_pool.h"
 #include "bench/subdivide.h"
 #include "core/character.h"
 #include "core/motion.h"
