@@ -4,6 +4,7 @@
 #include <string>
 
 #include "core/internal/lanes.h"
+#include "core/internal/simd_dispatch.h"
 #include "core/character.h"
 
 namespace motionlod::core {
@@ -41,9 +42,9 @@ inline int FirstNonInvertibleOfFour(const double* m) {
 
 }  // namespace
 
-size_t FirstNonInvertibleAffine(std::span<const Affine34d> matrices) {
+size_t FirstNonInvertibleAffine(std::span<const Affine34d> matrices, SimdChoice simd) {
   static_assert(sizeof(Affine34d) == 12 * sizeof(double));
-  {
+  return RunWithSimd(simd, [&]() -> size_t {
     const size_t count = matrices.size();
     const size_t whole = count - count % 4;
     for (size_t first = 0; first < whole; first += 4) {
@@ -58,14 +59,14 @@ size_t FirstNonInvertibleAffine(std::span<const Affine34d> matrices) {
     }
     const int bad = FirstNonInvertibleOfFour(last[0].data());
     return bad < 4 ? whole + bad : count;
-  }
+  });
 }
 
 bool IsInvertibleAffine(const Affine34d& matrix) {
   return FirstNonInvertibleAffine(std::span<const Affine34d>(&matrix, 1)) == 1;
 }
 
-Status ValidateMotion(const Motion& motion, const Character& character) {
+Status ValidateMotion(const Motion& motion, const Character& character, SimdChoice simd) {
   if (!(motion.fps > 0) || !std::isfinite(motion.fps)) {
     return InvalidArgument("the motion's frame rate must be positive, got " + std::to_string(motion.fps));
   }
@@ -80,7 +81,7 @@ Status ValidateMotion(const Motion& motion, const Character& character) {
     return InvalidArgument("the motion holds " + std::to_string(motion.joint_world.size()) +
                            " matrices, expected frames x joints = " + std::to_string(expected));
   }
-  const size_t bad = FirstNonInvertibleAffine(motion.joint_world);
+  const size_t bad = FirstNonInvertibleAffine(motion.joint_world, simd);
   if (bad == motion.joint_world.size()) return Status::Ok();
   const int t = static_cast<int>(bad / motion.joint_count),
             j = static_cast<int>(bad % motion.joint_count);

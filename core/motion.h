@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "base/status.h"
+#include "core/simd.h"
 #include "core/types.h"
 
 namespace motionlod::core {
@@ -35,9 +36,13 @@ bool IsInvertibleAffine(const Affine34d& matrix);
 // The index of the first matrix that IsInvertibleAffine rejects, or matrices.size() when it
 // rejects none. Four matrices at a time, each coefficient one vector of their four values:
 // a long clip holds 10^5 joint matrices, and a bake checks its motion at each entry point.
-size_t FirstNonInvertibleAffine(std::span<const Affine34d> matrices);
+// In the given machine version (core/simd.h): a long clip's validation in the baseline
+// version of its vector code costs four times the instructions.
+size_t FirstNonInvertibleAffine(std::span<const Affine34d> matrices,
+                                SimdChoice simd = SimdChoice::kWidest);
 
 // Checks shapes against the character, finiteness and invertibility of every matrix.
-Status ValidateMotion(const Motion& motion, const Character& character);
+Status ValidateMotion(const Motion& motion, const Character& character,
+                      SimdChoice simd = SimdChoice::kWidest);
 
 }  // namespace motionlod::core

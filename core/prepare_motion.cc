@@ -30,7 +30,7 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
     SimdChoice simd, const PieceRunner& run) {
   if (!character) return InvalidArgument("PreparedMotion: no character");
   if (Status status = settings.Validate(); !status.ok()) return status;
-  if (Status status = ValidateMotion(motion, *character); !status.ok()) return status;
+  if (Status status = ValidateMotion(motion, *character, simd); !status.ok()) return status;
 
   auto data = std::make_unique<internal::PreparedData>();
   internal::PreparedData& d = *data;

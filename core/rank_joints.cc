@@ -112,7 +112,7 @@ Status RankJointsJob::Validate() const {
   if (character == nullptr || motion == nullptr) {
     return InvalidArgument("RankJointsJob needs a character and a motion");
   }
-  if (Status status = ValidateMotion(*motion, *character); !status.ok()) return status;
+  if (Status status = ValidateMotion(*motion, *character, simd); !status.ok()) return status;
   std::string unknown;
   for (const std::string& name : locked_joints) {
     if (character->FindJoint(name) < 0) unknown += (unknown.empty() ? "'" : ", '") + name + "'";

@@ -209,7 +209,7 @@ StatusOr<BakeInputs> PrepareInputs(const BakeRequest& request) {
   TaskPool pool(request.threads);
   auto inputs = PrepareInputsOn(request, pool);
   if (!inputs.ok()) return inputs.status();
-  if (Status status = core::ValidateMotion(inputs->motion, *inputs->character); !status.ok()) {
+  if (Status status = core::ValidateMotion(inputs->motion, *inputs->character, request.simd); !status.ok()) {
     return status;
   }
   return inputs;

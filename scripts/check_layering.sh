@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Fails when a layer includes what STYLE.md keeps out of it (the arrows of the layers):
 #   base      the standard library only: what every layer shares
-#   core      base and Eigen
+#   core      base and Eigen; reads no environment. Its public headers (core/*.h) and
+#             references (core/reference/) never include the private core/internal/
 #   proto     base, JSON and xxHash: no Eigen, no core
 #   io        core and base, Assimp behind one file; starts no thread (takes a PieceRunner)
 #   pipeline  core, io, proto and base, and the thread pool
@@ -35,13 +36,25 @@ forbid base "Eigen|spdlog|nlohmann|httplib|assimp|xxhash|$higher" \
   "anything but the standard library and base/"
 forbid core 'iostream|fstream|cstdio|stdio\.h|filesystem|thread|mutex|future|spdlog|nlohmann|httplib|assimp|xxhash|io/|proto/|pipeline/|tools/|server/|client/' \
   "I/O, threads, logging, JSON, HTTP, Assimp or a higher layer"
-forbid proto 'Eigen|core/|io/|pipeline/|tools/|server/|client/|spdlog|httplib|assimp|base/(lanes|simd)\.h' \
-  "Eigen, the core, io, a higher layer, logging, HTTP, Assimp or the core's SIMD helpers"
-forbid io 'thread|future|condition_variable|spdlog|httplib|pipeline/|tools/|server/|client/|proto/|base/(lanes|simd)\.h' \
-  "threads (it takes a PieceRunner), logging, HTTP, a higher layer or the core's SIMD helpers"
-forbid pipeline 'spdlog|httplib|tools/|server/|client/' "logging, HTTP or a higher layer"
-forbid tools 'httplib|server/|client/' "HTTP, the server or the client"
-forbid server 'tools/|client/' "the tools or the client"
+forbid proto 'Eigen|core/|io/|pipeline/|tools/|server/|client/|spdlog|httplib|assimp' \
+  "Eigen, the core, io, a higher layer, logging, HTTP or Assimp"
+forbid io 'thread|future|condition_variable|spdlog|httplib|pipeline/|tools/|server/|client/|proto/|core/internal/' \
+  "threads (it takes a PieceRunner), logging, HTTP, a higher layer or the core's internals"
+forbid pipeline 'spdlog|httplib|tools/|server/|client/|core/internal/' \
+  "logging, HTTP, a higher layer or the core's internals"
+forbid tools 'httplib|server/|client/|core/internal/' "HTTP, the server, the client or the core's internals"
+forbid server 'tools/|client/|core/internal/' "the tools, the client or the core's internals"
+# The core's public surface: what the pipeline calls, not how the core does it.
+for header in core/*.h core/reference/*.h; do
+  if grep -qE '^#include [<"]core/internal/' "$header"; then
+    echo "layering: the public header $header must not include core/internal/"
+    status=1
+  fi
+done
+if grep -RnE --include='*.h' --include='*.cc' 'getenv|environ\b' core; then
+  echo "layering: the core reads no environment (the programs pass settings down)"
+  status=1
+fi
 # The thin client needs proto/ and base/ only.
 forbid client 'Eigen|core/|io/|pipeline/|tools/|server/|spdlog|assimp' \
   "Eigen, the core, io, the pipeline, the tools, the server, logging or Assimp"
