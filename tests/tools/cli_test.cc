@@ -108,7 +108,7 @@ TEST_F(Cli, BakesTheSampleWithTheDefaultLadder) {
   EXPECT_NE(svg.find("vpno+pd"), std::string::npos);
 }
 
-// Both machine versions of the hot loops (base/simd.h) bake the same levels: the figures
+// Both machine versions of the hot loops (core/simd.h) bake the same levels: the figures
 // agree to the rounding of fused multiply-adds. On a CPU without AVX2 and FMA both runs
 // are the baseline version.
 TEST_F(Cli, TheAvx2AndBaselineVersionsReportTheSameFigures) {
