@@ -276,7 +276,7 @@ def machine(context, command):
         f"the harness, not the code measured, which is Release `-O3`)",
     ]
     if context.get("simd"):
-        facts.append(f"- hot loops: the `{context['simd']}` version (base/simd.h)")
+        facts.append(f"- hot loops: the `{context['simd']}` version (core/simd.h)")
     if command:
         facts.append(f"- command: `{command}`")
     return facts
