@@ -70,8 +70,7 @@ struct LaneDelta {
 //   f(lambda) = sum_g a_g U_g + lambda (1 - sum_g a_g) + sum_g (b_g - a_g) max(0, U_g - lambda)
 // (weak duality) and equals the smallest f at a breakpoint lambda in {0, U_g}. lambda = 0
 // gives sum_g b_g U_g and lambda = max_g U_g, with every a_g 0, gives max_g U_g: this is
-// never looser than the better of those two, and measured 2x tighter on the blended
-// clusters of stormtrooper's every-level bakes (docs/PERFORMANCE.md, round 9), where
+// never looser than the better of those two, and much tighter on blended clusters, where
 // the largest weights of a cluster in a blend region sum to well over 1.
 // The breakpoints past lambda = 0 and max_g U_g cost a pass over the joints each: with
 // kRefine they are tried where one of those two is above `threshold` (nothing to gain

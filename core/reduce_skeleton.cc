@@ -16,7 +16,7 @@ StatusOr<ReducedSkeleton> ReduceSkeleton(const Character& character, std::span<c
   const std::vector<int>& parents = character.skeleton().parents;
   ReducedSkeleton reduced;
   // Sized up front: an every-level bake reduces n skeletons serially before its solves
-  // start (Orc@16089v's 43 on 2 threads: 30 -> 18 us with the other thread idle).
+  // start, with the other thread idle.
   const auto kept = static_cast<size_t>(std::count(keep.begin(), keep.end(), true));
   reduced.kept_joints.reserve(kept);
   reduced.parent_slots.reserve(kept);
