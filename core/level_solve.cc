@@ -10,7 +10,6 @@
 #include "core/internal/level_solve.h"
 #include "core/internal/normal_equations.h"
 #include "core/internal/rigid_projection.h"
-#include "core/internal/simd_dispatch.h"
 
 namespace motionlod::core {
 
@@ -94,26 +93,24 @@ DeltaView VariantSolution::Delta(const PreparedData& d, const ReducedSkeleton& l
 }
 
 StatusOr<VariantSolution> SolveVariant(const PreparedData& d, const ReducedSkeleton& level) {
-  return RunWithSimd(d.simd, [&]() -> StatusOr<VariantSolution> {
-    if (Status status = ValidateLevel(level, d.n); !status.ok()) return status;
-    const int n = d.n;
-    const int m = level.kept_count();
-    // With every joint kept, the original matrices are the least-squares solution
-    // (SolveNormalEquations), and original matrices that are rotations already (to within their
-    // source's float precision) are the constrained minimiser too (no residual): they are
-    // the level as they are, without the system (the right-hand sides alone are 3T x 4n),
-    // and the rigid variants keep them bit for bit, as the fitted ones do, instead of
-    // projecting them by a few 1e-6, re-solving them and measuring an error of 1e-13.
-    if (m == n && (!IsRigid(d.settings.variant) || AllRotations(d.kt, d.simd))) {
-      return VariantSolution{MatrixXd(), true};
-    }
-    auto system = SolveNormalEquations(d, level);
-    if (!system.ok()) return system.status();
-    if (IsRigid(d.settings.variant)) {
-      if (Status status = ProjectOnRotations(d, *system); !status.ok()) return status;
-    }
-    return VariantSolution{std::move(system->x), false};
-  });
+  if (Status status = ValidateLevel(level, d.n); !status.ok()) return status;
+  const int n = d.n;
+  const int m = level.kept_count();
+  // With every joint kept, the original matrices are the least-squares solution
+  // (SolveNormalEquations), and original matrices that are rotations already (to within their
+  // source's float precision) are the constrained minimiser too (no residual): they are
+  // the level as they are, without the system (the right-hand sides alone are 3T x 4n),
+  // and the rigid variants keep them bit for bit, as the fitted ones do, instead of
+  // projecting them by a few 1e-6, re-solving them and measuring an error of 1e-13.
+  if (m == n && (!IsRigid(d.settings.variant) || AllRotations(d.kt, d.simd))) {
+    return VariantSolution{MatrixXd(), true};
+  }
+  auto system = SolveNormalEquations(d, level);
+  if (!system.ok()) return system.status();
+  if (IsRigid(d.settings.variant)) {
+    if (Status status = ProjectOnRotations(d, *system); !status.ok()) return status;
+  }
+  return VariantSolution{std::move(system->x), false};
 }
 
 }  // namespace internal
