@@ -109,6 +109,35 @@ void EvaluateErrors(const PreparedData& d, const DeltaView& delta, const std::ve
   }
 }
 
+LevelErrors WorstOverClips(std::vector<LevelErrors> per_clip, std::span<const MotionClip> clips) {
+  LevelErrors out;
+  for (size_t c = 0; c < per_clip.size(); ++c) {
+    const LevelErrors& clip = per_clip[c];
+    const int first = clips[c].first_frame;
+    for (auto [all, part] : {std::pair{&out.e, &clip.e}, std::pair{&out.ep_vertex, &clip.ep_vertex},
+                             std::pair{&out.ep_joint, &clip.ep_joint},
+                             std::pair{&out.en_vertex, &clip.en_vertex},
+                             std::pair{&out.en_joint, &clip.en_joint}}) {
+      all->insert(all->end(), part->begin(), part->end());
+    }
+    if (c == 0 || clip.max_e > out.max_e) {
+      out.max_e = clip.max_e;
+      out.max_e_frame = first + clip.max_e_frame;
+    }
+    if (c == 0 || clip.max_vertex_error_pct > out.max_vertex_error_pct) {
+      out.max_vertex_error_pct = clip.max_vertex_error_pct;
+      out.max_vertex_frame = first + clip.max_vertex_frame;
+      out.max_vertex_index = clip.max_vertex_index;
+    }
+    out.mean_e = std::max(out.mean_e, clip.mean_e);
+    out.rms_vertex_error_pct = std::max(out.rms_vertex_error_pct, clip.rms_vertex_error_pct);
+    out.mean_vertex_error_pct = std::max(out.mean_vertex_error_pct, clip.mean_vertex_error_pct);
+    out.mean_normal_error_deg = std::max(out.mean_normal_error_deg, clip.mean_normal_error_deg);
+  }
+  out.per_clip = std::move(per_clip);
+  return out;
+}
+
 void FinishErrors(const PreparedData& d, const SampleSums* sums, LevelErrors& out) {
   const int frames = d.frames;
   const double height = d.character->height();

@@ -56,6 +56,15 @@ uint64_t SolveSettings::Hash() const {
   return Fnv1a64Value(sample_vertices, h);
 }
 
+const char* LevelSourceName(LevelSource source) {
+  switch (source) {
+    case LevelSource::kSolved: return "solved";
+    case LevelSource::kReparented: return "reparented";
+    case LevelSource::kCoarserLevel: return "coarser level";
+  }
+  return "?";
+}
+
 namespace internal {
 
 Status ValidateLevel(const ReducedSkeleton& level, int n) {
@@ -115,12 +124,76 @@ StatusOr<VariantSolution> SolveVariant(const PreparedData& d, const ReducedSkele
 
 }  // namespace internal
 
+namespace {
+
+// Every figure of candidate matrices S for a level keeping `kept`, clip by clip, each on
+// its clip's part of the prepared motion (core/internal/prepared_data.h), combined as the
+// worst clip's. S is `x` (4 rows per matrix, 3T columns over every frame) read at
+// solution_row[k] for joint k, or the original matrices where `x` is null.
+LevelErrors ClipFigures(const internal::PreparedData& d, const MatrixXd* x,
+                        const std::vector<int>& solution_row, const std::vector<int>& kept,
+                        const PieceRunner& run) {
+  const auto evaluate = [&](const internal::PreparedData& part, const MatrixXd* solution) {
+    LevelErrors errors;
+    internal::EvaluateErrors(part, internal::DeltaView{solution ? solution : &part.kt, solution_row, &part.kt},
+                             kept, internal::Figures::kAll, errors,
+                             std::numeric_limits<double>::infinity(), run);
+    return errors;
+  };
+  std::vector<LevelErrors> per_clip;
+  if (d.clip_parts.empty()) {
+    per_clip.push_back(evaluate(d, x));
+  } else {
+    for (size_t c = 0; c < d.clips.size(); ++c) {
+      const MotionClip& clip = d.clips[c];
+      MatrixXd part_x;
+      if (x != nullptr) part_x = x->middleCols(3 * clip.first_frame, 3 * clip.frame_count);
+      per_clip.push_back(evaluate(d.clip_parts[c]->data(), x != nullptr ? &part_x : nullptr));
+    }
+  }
+  return internal::WorstOverClips(std::move(per_clip), d.clips);
+}
+
+// The rows of x (4 per matrix, 3T columns) as the level's T x m float matrices.
+void StoreMatrices(const MatrixXd& x, int m, int frames, RowMajorAffine34f* out) {
+  // Row r of K'_s(t) is column 3t + r of x from row 4s: four contiguous doubles, converted
+  // as one vector into the row-major matrix's row. (The pointers and the stride are local:
+  // a store through a vector type that may alias anything would reload them after every
+  // row.)
+  static_assert(sizeof(RowMajorAffine34f) == 12 * sizeof(float));
+  float* target = out->data();
+  const double* columns = x.data();
+  const Eigen::Index stride = x.rows();
+  for (int t = 0; t < frames; ++t) {
+    for (int s = 0; s < m; ++s) {
+      for (int r = 0; r < 3; ++r) {
+        *AsLanes4f(target + 4 * r) =
+            __builtin_convertvector(*AsLanes4(columns + (3 * t + r) * stride + 4 * s), Lanes4f);
+      }
+      target += 12;
+    }
+  }
+}
+
+// Whether candidate figures are no worse than the reparented level's in every figure the
+// guarantee covers.
+bool NoWorseThan(const LevelErrors& candidate, const LevelErrors& baseline) {
+  return candidate.max_vertex_error_pct <= baseline.max_vertex_error_pct &&
+         candidate.mean_vertex_error_pct <= baseline.mean_vertex_error_pct &&
+         candidate.mean_e <= baseline.mean_e;
+}
+
+}  // namespace
+
+std::span<const MotionClip> PreparedMotion::clips() const { return data_->clips; }
+
 StatusOr<LevelResult> PreparedMotion::SolveLevel(const ReducedSkeleton& level) const {
   auto result = SolveOptimized(level);
   if (!result.ok()) return result.status();
   auto baseline = BaselineErrors(level);
   if (!baseline.ok()) return baseline.status();
   result->baseline = *std::move(baseline);
+  KeepNoWorseThanReparenting(*result);
   return result;
 }
 
@@ -130,30 +203,14 @@ StatusOr<LevelResult> PreparedMotion::SolveOptimized(const ReducedSkeleton& leve
   auto solution = internal::SolveVariant(d, level);
   if (!solution.ok()) return solution.status();
   const int m = level.kept_count();
-  const MatrixXd& x = solution->Matrices(d);
-
   LevelResult result;
   result.skeleton = level;
   result.matrices.resize(static_cast<size_t>(d.frames) * m);
-  // Row r of K'_s(t) is column 3t + r of x from row 4s: four contiguous doubles, converted
-  // as one vector into the row-major matrix's row. (The pointers and the stride are local:
-  // a store through a vector type that may alias anything would reload them after every
-  // row.)
-  static_assert(sizeof(RowMajorAffine34f) == 12 * sizeof(float));
-  float* out = result.matrices.front().data();
-  const double* columns = x.data();
-  const Eigen::Index stride = x.rows();
-  for (int t = 0; t < d.frames; ++t) {
-    for (int s = 0; s < m; ++s) {
-      for (int r = 0; r < 3; ++r) {
-        *AsLanes4f(out + 4 * r) =
-            __builtin_convertvector(*AsLanes4(columns + (3 * t + r) * stride + 4 * s), Lanes4f);
-      }
-      out += 12;
-    }
-  }
-  internal::EvaluateErrors(d, solution->Delta(d, level), level.kept_joints, internal::Figures::kAll,
-                           result.optimized, std::numeric_limits<double>::infinity(), run);
+  StoreMatrices(solution->Matrices(d), m, d.frames, result.matrices.data());
+  const internal::DeltaView delta = solution->Delta(d, level);
+  result.optimized = ClipFigures(d, solution->unchanged ? nullptr : &solution->x, delta.solution_row,
+                                 level.kept_joints, run);
+  result.sources.assign(d.clips.size(), LevelSource::kSolved);
   return result;
 }
 
@@ -161,11 +218,82 @@ StatusOr<LevelErrors> PreparedMotion::BaselineErrors(const ReducedSkeleton& leve
                                                      const PieceRunner& run) const {
   const internal::PreparedData& d = *data_;
   if (Status status = internal::ValidateLevel(level, d.n); !status.ok()) return status;
-  LevelErrors errors;
-  internal::EvaluateErrors(d, internal::BaselineDelta(d, level), level.kept_joints,
-                           internal::Figures::kAll, errors, std::numeric_limits<double>::infinity(),
-                           run);
-  return errors;
+  return ClipFigures(d, nullptr, internal::BaselineDelta(d, level).solution_row, level.kept_joints, run);
+}
+
+void PreparedMotion::KeepNoWorseThanReparenting(LevelResult& result) const {
+  const internal::PreparedData& d = *data_;
+  const int m = result.skeleton.kept_count();
+  bool replaced = false;
+  for (size_t c = 0; c < d.clips.size(); ++c) {
+    if (NoWorseThan(result.optimized.per_clip[c], result.baseline.per_clip[c])) continue;
+    const MotionClip& clip = d.clips[c];
+    for (int t = clip.first_frame; t < clip.first_frame + clip.frame_count; ++t) {
+      for (int s = 0; s < m; ++s) {
+        const int j = result.skeleton.kept_joints[s];
+        result.matrices[static_cast<size_t>(t) * m + s] =
+            d.kt.block<4, 3>(4 * j, 3 * t).transpose().cast<float>();
+      }
+    }
+    result.optimized.per_clip[c] = result.baseline.per_clip[c];
+    result.sources[c] = LevelSource::kReparented;
+    replaced = true;
+  }
+  if (replaced) result.optimized = internal::WorstOverClips(std::move(result.optimized.per_clip), d.clips);
+}
+
+Status PreparedMotion::LiftCoarserLevel(const LevelResult& coarser, LevelResult& finer) const {
+  const internal::PreparedData& d = *data_;
+  const ReducedSkeleton& from = coarser.skeleton;
+  const ReducedSkeleton& to = finer.skeleton;
+  if (Status status = internal::ValidateLevel(from, d.n); !status.ok()) return status;
+  if (Status status = internal::ValidateLevel(to, d.n); !status.ok()) return status;
+  for (int j : from.kept_joints) {
+    if (to.kept_joints[to.joint_to_slot[j]] != j) {
+      return InvalidArgument("LiftCoarserLevel: the finer level removes joint '" +
+                             d.character->skeleton().joint_names[j] + "', which the coarser keeps");
+    }
+  }
+  const int m_from = from.kept_count(), m_to = to.kept_count();
+  bool lifted = false;
+  for (size_t c = 0; c < d.clips.size(); ++c) {
+    if (finer.optimized.per_clip[c].max_vertex_error_pct <=
+        coarser.optimized.per_clip[c].max_vertex_error_pct) {
+      continue;
+    }
+    const MotionClip& clip = d.clips[c];
+    const internal::PreparedData& part = d.clip_parts.empty() ? d : d.clip_parts[c]->data();
+    // The coarser level's matrices of the clip as the rows of a solution (4m x 3T).
+    MatrixXd x(4 * m_from, 3 * clip.frame_count);
+    for (int t = 0; t < clip.frame_count; ++t) {
+      for (int s = 0; s < m_from; ++s) {
+        x.block<4, 3>(4 * s, 3 * t) =
+            coarser.matrices[static_cast<size_t>(clip.first_frame + t) * m_from + s]
+                .cast<double>()
+                .transpose();
+      }
+    }
+    std::vector<int> solution_row(d.n);
+    for (int k = 0; k < d.n; ++k) solution_row[k] = 4 * from.joint_to_slot[k];
+    LevelErrors figures;
+    internal::EvaluateErrors(part, internal::DeltaView{&x, solution_row, &part.kt}, to.kept_joints,
+                             internal::Figures::kAll, figures);
+    if (!NoWorseThan(figures, finer.baseline.per_clip[c]) ||
+        figures.max_vertex_error_pct >= finer.optimized.per_clip[c].max_vertex_error_pct) {
+      continue;
+    }
+    for (int t = clip.first_frame; t < clip.first_frame + clip.frame_count; ++t) {
+      for (int s = 0; s < m_to; ++s) {
+        finer.matrices[static_cast<size_t>(t) * m_to + s] =
+            coarser.matrices[static_cast<size_t>(t) * m_from + from.joint_to_slot[to.kept_joints[s]]];
+      }
+    }
+    finer.optimized.per_clip[c] = std::move(figures);
+    finer.sources[c] = LevelSource::kCoarserLevel;
+    lifted = true;
+  }
+  if (lifted) finer.optimized = internal::WorstOverClips(std::move(finer.optimized.per_clip), d.clips);
+  return Status::Ok();
 }
 
 StatusOr<Eigen::MatrixXd> PreparedMotion::SolveLeastSquares(const ReducedSkeleton& level) const {

@@ -66,6 +66,30 @@ bool IsInvertibleAffine(const Affine34d& matrix) {
   return FirstNonInvertibleAffine(std::span<const Affine34d>(&matrix, 1)) == 1;
 }
 
+std::vector<MotionClip> Motion::Clips() const {
+  if (!clips.empty()) return clips;
+  return {MotionClip{name, fps, 0, frame_count}};
+}
+
+StatusOr<Motion> ConcatenateClips(std::span<const Motion> clips) {
+  if (clips.empty()) return InvalidArgument("no clips to concatenate");
+  Motion out;
+  out.name = clips.front().name;
+  out.fps = clips.front().fps;
+  out.joint_count = clips.front().joint_count;
+  for (const Motion& clip : clips) {
+    if (!clip.clips.empty()) return InvalidArgument("clip '" + clip.name + "' is made of clips itself");
+    if (clip.joint_count != out.joint_count) {
+      return InvalidArgument("clip '" + clip.name + "' animates " + std::to_string(clip.joint_count) +
+                             " joints, the first " + std::to_string(out.joint_count));
+    }
+    out.clips.push_back(MotionClip{clip.name, clip.fps, out.frame_count, clip.frame_count});
+    out.frame_count += clip.frame_count;
+    out.joint_world.insert(out.joint_world.end(), clip.joint_world.begin(), clip.joint_world.end());
+  }
+  return out;
+}
+
 Status ValidateMotion(const Motion& motion, const Character& character, SimdChoice simd) {
   if (!(motion.fps > 0) || !std::isfinite(motion.fps)) {
     return InvalidArgument("the motion's frame rate must be positive, got " + std::to_string(motion.fps));
@@ -80,6 +104,19 @@ Status ValidateMotion(const Motion& motion, const Character& character, SimdChoi
   if (motion.joint_world.size() != expected) {
     return InvalidArgument("the motion holds " + std::to_string(motion.joint_world.size()) +
                            " matrices, expected frames x joints = " + std::to_string(expected));
+  }
+  int next_frame = 0;
+  for (const MotionClip& clip : motion.clips) {
+    if (clip.first_frame != next_frame || clip.frame_count < 1 || !(clip.fps > 0) ||
+        !std::isfinite(clip.fps)) {
+      return InvalidArgument("the motion's clip '" + clip.name +
+                             "' does not follow the one before it with frames and a positive rate");
+    }
+    next_frame += clip.frame_count;
+  }
+  if (!motion.clips.empty() && next_frame != motion.frame_count) {
+    return InvalidArgument("the motion's clips cover " + std::to_string(next_frame) + " of its " +
+                           std::to_string(motion.frame_count) + " frames");
   }
   const size_t bad = FirstNonInvertibleAffine(motion.joint_world, simd);
   if (bad == motion.joint_world.size()) return Status::Ok();

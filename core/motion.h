@@ -18,6 +18,15 @@ using ::motionlod::StatusOr;
 
 class Character;
 
+// Frames [first_frame, first_frame + frame_count) of a motion, played as one clip (an
+// animation of the source).
+struct MotionClip {
+  std::string name;
+  double fps = 30.0;  // frames per second, > 0
+  int first_frame = 0;
+  int frame_count = 0;  // >= 1
+};
+
 struct Motion {
   std::string name;
   double fps = 30.0;  // frames per second, > 0
@@ -25,9 +34,19 @@ struct Motion {
   int joint_count = 0;  // n, equal to the character's
   // T x n, row-major by frame: joint_world[t * n + j] = M_j(t), model space.
   std::vector<Affine34d> joint_world;
+  // The clips whose frames follow one another in joint_world, in order, covering every
+  // frame: a character's clips are baked as one motion with one reduced skeleton per level,
+  // while each clip keeps its own figures. Empty: one clip, the whole motion (name, fps).
+  std::vector<MotionClip> clips;
 
   const Affine34d& world(int t, int j) const { return joint_world[t * joint_count + j]; }
+  // `clips`, or the one clip of the whole motion.
+  std::vector<MotionClip> Clips() const;
 };
+
+// The clips one after another as one motion (Motion::clips names them); every clip animates
+// the same joints. Fails on no clips or clips with other joint counts.
+StatusOr<Motion> ConcatenateClips(std::span<const Motion> clips);
 
 // Whether an affine matrix can be a joint's transform: every entry finite and its 3x3 part
 // A invertible by a margin that no scale changes, |det A| > 1e-12 |A|_F^3.

@@ -3,6 +3,7 @@
 // alpha and beta, F^T = (Q Kt)^T for the right-hand sides, and the error sample.
 #include <algorithm>
 #include <numeric>
+#include <string>
 
 #include "core/internal/block_cholesky.h"
 #include "core/internal/lanes.h"
@@ -159,7 +160,67 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
   for (int j = 0; j < n; ++j) {
     d.joint_fit[j] = d.alpha * d.joint_cp[j] + d.beta_fit * d.joint_cn[j];
   }
+  d.clips = motion.Clips();
+  if (d.clips.size() > 1) {
+    for (const MotionClip& clip : d.clips) {
+      std::vector<int> frames(clip.frame_count);
+      std::iota(frames.begin(), frames.end(), clip.first_frame);
+      auto part = internal::SelectFrames(d, frames);
+      if (!part.ok()) return part.status();
+      d.clip_parts.push_back(*std::move(part));
+    }
+  }
   return std::make_shared<const PreparedMotion>(std::move(data));
 }
+
+namespace internal {
+
+StatusOr<std::shared_ptr<const PreparedMotion>> SelectFrames(const PreparedData& d,
+                                                             std::span<const int> frames) {
+  if (frames.empty()) return InvalidArgument("SelectFrames: no frames");
+  for (size_t i = 0; i < frames.size(); ++i) {
+    if (frames[i] < 0 || frames[i] >= d.frames || (i > 0 && frames[i] <= frames[i - 1])) {
+      return InvalidArgument("SelectFrames: the frames must ascend within [0, " +
+                             std::to_string(d.frames) + ")");
+    }
+  }
+  auto data = std::make_unique<PreparedData>();
+  PreparedData& e = *data;
+  // What does not depend on the frames, as it is.
+  e.character = d.character;
+  e.settings = d.settings;
+  e.simd = d.simd;
+  e.n = d.n;
+  e.pairs = d.pairs;
+  e.pair_cp = d.pair_cp;
+  e.pair_cn = d.pair_cn;
+  e.pair_fit = d.pair_fit;
+  e.joint_cp = d.joint_cp;
+  e.joint_cn = d.joint_cn;
+  e.joint_fit = d.joint_fit;
+  e.alpha = d.alpha;
+  e.beta = d.beta;
+  e.beta_fit = d.beta_fit;
+  // Each frame's columns of kt and rows of ft.
+  const int count = static_cast<int>(frames.size());
+  e.frames = count;
+  e.kt.resize(d.kt.rows(), 3 * count);
+  e.ft.resize(3 * count, d.ft.cols());
+  // ft a column at a time: a frame's three rows of a column are contiguous.
+  for (Eigen::Index col = 0; col < d.ft.cols(); ++col) {
+    const double* source = d.ft.col(col).data();
+    double* target = e.ft.col(col).data();
+    for (int i = 0; i < count; ++i) {
+      for (int r = 0; r < 3; ++r) target[3 * i + r] = source[3 * frames[i] + r];
+    }
+  }
+  for (int i = 0; i < count; ++i) e.kt.middleCols<3>(3 * i) = d.kt.middleCols<3>(3 * frames[i]);
+  e.sample = MakeErrorSample(*e.character, e.settings, e.kt, count);
+  const MotionClip& first = d.clips.empty() ? MotionClip{} : d.clips.front();
+  e.clips = {MotionClip{first.name, first.fps, 0, count}};
+  return std::make_shared<const PreparedMotion>(std::move(data));
+}
+
+}  // namespace internal
 
 }  // namespace motionlod::core

@@ -108,6 +108,17 @@ void LocalTransforms(const Affine34d* world, const Affine34d* parent, size_t str
 
 }  // namespace
 
+const char* RankingMethodName(RankingMethod method) {
+  return method == RankingMethod::kGreedy ? "greedy" : "paper";
+}
+
+StatusOr<RankingMethod> ParseRankingMethod(std::string_view name) {
+  for (RankingMethod method : {RankingMethod::kGreedy, RankingMethod::kPaper}) {
+    if (name == RankingMethodName(method)) return method;
+  }
+  return InvalidArgument("unknown ranking '" + std::string(name) + "'; expected greedy or paper");
+}
+
 Status RankJointsJob::Validate() const {
   if (character == nullptr || motion == nullptr) {
     return InvalidArgument("RankJointsJob needs a character and a motion");

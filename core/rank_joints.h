@@ -15,6 +15,7 @@
 
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "base/pieces.h"
@@ -24,6 +25,12 @@
 #include "core/simd.h"
 
 namespace motionlod::core {
+
+// Which order removes the joints: greedy by error (core/greedy_ranking.h, the default) or
+// the paper's priorities (RankJointsJob).
+enum class RankingMethod { kGreedy, kPaper };
+const char* RankingMethodName(RankingMethod method);  // "greedy", "paper"
+StatusOr<RankingMethod> ParseRankingMethod(std::string_view name);
 
 struct JointRanking {
   std::vector<double> hierarchical;  // h_j, length

@@ -15,40 +15,12 @@ namespace internal {
 StatusOr<std::shared_ptr<const PreparedMotion>> EveryNthFrame(const PreparedMotion& prepared,
                                                               int stride) {
   if (stride < 1) return InvalidArgument("EveryNthFrame: the stride must be at least 1");
-  const PreparedData& d = prepared.data();
-  auto data = std::make_unique<PreparedData>();
-  PreparedData& e = *data;
-  // What does not depend on the frames, as it is.
-  e.character = d.character;
-  e.settings = d.settings;
-  e.simd = d.simd;
-  e.n = d.n;
-  e.pairs = d.pairs;
-  e.pair_cp = d.pair_cp;
-  e.pair_cn = d.pair_cn;
-  e.pair_fit = d.pair_fit;
-  e.joint_cp = d.joint_cp;
-  e.joint_cn = d.joint_cn;
-  e.joint_fit = d.joint_fit;
-  e.alpha = d.alpha;
-  e.beta = d.beta;
-  e.beta_fit = d.beta_fit;
-  // Each frame's columns of kt and rows of ft.
-  const int frames = 1 + (d.frames - 1) / stride;  // d.frames >= 1; no overflow
-  e.frames = frames;
-  e.kt.resize(d.kt.rows(), 3 * frames);
-  e.ft.resize(3 * frames, d.ft.cols());
-  // ft a column at a time: a frame's three rows of a column are contiguous.
-  for (Eigen::Index col = 0; col < d.ft.cols(); ++col) {
-    const double* source = d.ft.col(col).data();
-    double* target = e.ft.col(col).data();
-    for (int t = 0; t < frames; ++t) {
-      for (int r = 0; r < 3; ++r) target[3 * t + r] = source[3 * t * stride + r];
-    }
+  std::vector<int> frames;
+  for (int t = 0; t < prepared.frame_count(); t += stride) {
+    frames.push_back(t);
+    if (t > prepared.frame_count() - stride) break;  // t + stride would pass the end or overflow
   }
-  for (int t = 0; t < frames; ++t) e.kt.middleCols<3>(3 * t) = d.kt.middleCols<3>(3 * t * stride);
-  e.sample = MakeErrorSample(*e.character, e.settings, e.kt, frames);
-  return std::make_shared<const PreparedMotion>(std::move(data));
+  return SelectFrames(prepared.data(), frames);
 }
 
 StatusOr<bool> MaxVertexErrorWithin(const PreparedMotion& prepared, const ReducedSkeleton& level,

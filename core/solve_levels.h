@@ -52,6 +52,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <string_view>
 #include <vector>
 
@@ -78,7 +79,7 @@ inline bool IsRigid(Variant v) { return v == Variant::kVPPD || v == Variant::kVP
 inline bool FitsNormals(Variant v) { return v == Variant::kVPNO || v == Variant::kVPNOPD; }
 
 // Bumped whenever results for the same inputs and settings may change.
-inline constexpr uint32_t kAlgorithmVersion = 6;
+inline constexpr uint32_t kAlgorithmVersion = 7;
 
 struct SolveSettings {
   Variant variant = Variant::kVPNOPD;
@@ -113,14 +114,29 @@ struct LevelErrors {
   // blended normals (degrees) over the sample of SolveSettings.
   double mean_vertex_error_pct = 0;
   double mean_normal_error_deg = 0;
+  // Each clip's figures (Motion::clips, in order) on its own frames: frame and vertex
+  // indices within the clip, per_clip empty. The figures above are the worst clip's (each
+  // on its own: mean_e the largest clip mean, max_e_frame and max_vertex_frame frames of
+  // the whole motion) and the per-frame vectors cover every frame; with one clip, its one
+  // entry equals them.
+  std::vector<LevelErrors> per_clip;
 };
+
+// Where a clip's matrices of a level come from.
+enum class LevelSource {
+  kSolved,        // the variant's solution
+  kReparented,    // the kept joints' original matrices: the solution was worse (KeepNoWorse...)
+  kCoarserLevel,  // a coarser level's matrices: this level's were worse (LiftCoarserLevel)
+};
+const char* LevelSourceName(LevelSource source);  // "solved", "reparented", "coarser level"
 
 struct LevelResult {
   ReducedSkeleton skeleton;
   // T x m, row-major by frame: K'_s(t) maps bind-pose model space to posed model space.
   std::vector<RowMajorAffine34f> matrices;
-  LevelErrors optimized;
-  LevelErrors baseline;  // kept joints keep their original matrices
+  LevelErrors optimized;  // of `matrices`
+  LevelErrors baseline;   // kept joints keep their original matrices
+  std::vector<LevelSource> sources;  // per clip
 };
 
 // Everything shared by the levels of one (character, motion, settings): built once,
@@ -144,9 +160,11 @@ class PreparedMotion {
   double beta() const;
   // K_j(t)^T stacked: 4n x 3T, block (4j, 3t) = K_j(t)^T.
   const Eigen::MatrixXd& original_matrices() const;
+  // Motion::Clips() of the motion it was made from.
+  std::span<const MotionClip> clips() const;
 
-  // Solves one level with every figure, optimised and baseline. Allocates per level, never
-  // per frame.
+  // Solves one level with every figure, optimised and baseline, no worse than the baseline
+  // (KeepNoWorseThanReparenting). Allocates per level, never per frame.
   StatusOr<LevelResult> SolveLevel(const ReducedSkeleton& level) const;
   // SolveLevel in two independent halves, to run concurrently: the matrices with the
   // optimised figures (LevelResult::baseline left empty), and the baseline's figures, which
@@ -158,6 +176,19 @@ class PreparedMotion {
   // The unconstrained least-squares solution in double precision, before any polar
   // projection: 4m x 3T, block (4s, 3t) = K'_s(t)^T. What SolveLevel starts from.
   StatusOr<Eigen::MatrixXd> SolveLeastSquares(const ReducedSkeleton& level) const;
+
+  // Step 5b, beyond the paper: a level is never worse than reparenting. Where a clip's
+  // solution has a larger maximum vertex error, mean vertex error or mean E than the
+  // baseline's (possible: least squares minimises the weighted square sum, not the
+  // maximum; the rigid projection and the regulariser move off the minimiser), that clip
+  // takes the baseline's matrices and figures (rigid too in the rigid variants). Needs
+  // result.baseline.
+  void KeepNoWorseThanReparenting(LevelResult& result) const;
+  // `finer` keeps every joint `coarser` keeps: each clip whose maximum vertex error is
+  // above the coarser level's takes the coarser level's matrices (each kept joint its
+  // coarser ancestor's: the same mesh, so the same vertex figures) where that stays no
+  // worse than the finer level's baseline, so that adding joints never raises the error.
+  Status LiftCoarserLevel(const LevelResult& coarser, LevelResult& finer) const;
 
   // The core's steps read the prepared data (core/internal/prepared_data.h).
   const internal::PreparedData& data() const { return *data_; }

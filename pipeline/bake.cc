@@ -10,6 +10,7 @@
 #include <optional>
 
 #include "core/baseline_sequence.h"
+#include "core/greedy_ranking.h"
 #include "core/reduce_skeleton.h"
 #include "core/smallest_level.h"
 #include "core/skinning.h"
@@ -141,9 +142,21 @@ StatusOr<std::map<int, core::LevelResult>> SolveLevelsJob::Run(TaskPool& pool) c
   std::map<int, core::LevelResult> out;
   for (size_t index = 0; index < count; ++index) {
     results[index]->baseline = *std::move(baselines[index]);
+    prepared->KeepNoWorseThanReparenting(*results[index]);
     out.emplace(counts[index], *std::move(results[index]));
   }
   return out;
+}
+
+Status LiftCoarserLevels(const core::PreparedMotion& prepared, std::map<int, core::LevelResult>& levels) {
+  for (auto coarser = levels.begin(); coarser != levels.end() && std::next(coarser) != levels.end();
+       ++coarser) {
+    if (Status status = prepared.LiftCoarserLevel(coarser->second, std::next(coarser)->second);
+        !status.ok()) {
+      return status;
+    }
+  }
+  return Status::Ok();
 }
 
 std::vector<int> DefaultLadder(int joint_count, int minimum) {
@@ -290,12 +303,22 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
           prepare_reported = true;
         }
       });
-  const StatusOr<core::JointRanking>& ranking = *ranked;
-  if (!ranking.ok()) return ranking.status();
-  const int minimum = ranking->locked_count;
+  const StatusOr<core::JointRanking>& paper_ranking = *ranked;
+  if (!paper_ranking.ok()) return paper_ranking.status();
   const StatusOr<std::shared_ptr<const core::PreparedMotion>>& prepared = *created;
   if (!prepared.ok()) return prepared.status();
   if (Cancelled(cancel)) return CancelledStatus();
+  core::JointRanking greedy_ranking;
+  if (request.ranking_method == core::RankingMethod::kGreedy) {
+    report_progress(0.06, "rank by error");
+    auto greedy = core::GreedyRankingJob{prepared->get(), request.locked_joints}.Run(pool.Runner());
+    if (!greedy.ok()) return greedy.status();
+    greedy_ranking = *std::move(greedy);
+    if (Cancelled(cancel)) return CancelledStatus();
+  }
+  const core::JointRanking* ranking =
+      request.ranking_method == core::RankingMethod::kGreedy ? &greedy_ranking : &*paper_ranking;
+  const int minimum = ranking->locked_count;
 
   std::vector<int> counts;
   if (request.all_levels) {
@@ -359,6 +382,8 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
     on_level_done(static_cast<int>(solved.size()));
   }
 
+  if (Status status = LiftCoarserLevels(**prepared, solved); !status.ok()) return status;
+
   // Fig. 7: the four variants at every level, errors only.
   std::vector<VariantCurve> curves;
   if (request.variant_curves) {
@@ -373,6 +398,9 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
       for (int count = n; count >= minimum; --count) every.push_back(count);
       auto curve_levels = SolveLevelsJob{*variant_prepared, &*ranking, every, {}, cancel}.Run(pool);
       if (!curve_levels.ok()) return curve_levels.status();
+      if (Status status = LiftCoarserLevels(**variant_prepared, *curve_levels); !status.ok()) {
+        return status;
+      }
       const std::map<int, core::LevelResult>& results = *curve_levels;
       VariantCurve curve{variant, {}};
       for (int count : every) {
@@ -393,7 +421,7 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
   const double bake_seconds = SecondsSince(start);
 
   report_progress(0.98, "measure");
-  const ReportInputs report_inputs{request,       character, motion, *ranking, **prepared,
+  const ReportInputs report_inputs{request,       character, motion, *ranking, *paper_ranking, **prepared,
                                    counts,        solved,    curves,  bake_seconds,
                                    request.measure_skinning_pass
                                        ? SkinningPassSeconds(character, motion, threads)

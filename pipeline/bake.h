@@ -37,6 +37,7 @@ struct BakeRequest {
   std::vector<int> levels;
   bool all_levels = false;
   std::vector<std::string> locked_joints;  // never removed (sockets, IK targets)
+  core::RankingMethod ranking_method = core::RankingMethod::kGreedy;
   core::SolveSettings settings;
   // The machine version of the core's hot loops (core/simd.h): the programs read it from
   // MOTIONLOD_SIMD.
@@ -93,7 +94,8 @@ double SkinningPassSeconds(const core::Character& character, const core::Motion&
 // Solves the levels that keep `counts` joints (decreasing, each in [locked_count, n]:
 // nested levels of the ranking) as Bake solves them, on a pool: each level's optimised
 // half is a task, and so is its baseline, except that levels a joint apart (every level)
-// take their baselines one from the other in one task (core::BaselineSequence).
+// take their baselines one from the other in one task (core::BaselineSequence). Each level
+// is then made no worse than its baseline (PreparedMotion::KeepNoWorseThanReparenting).
 struct SolveLevelsJob {
   std::shared_ptr<const core::PreparedMotion> prepared;
   const core::JointRanking* ranking = nullptr;
@@ -106,6 +108,10 @@ struct SolveLevelsJob {
   // The levels keyed by count.
   StatusOr<std::map<int, core::LevelResult>> Run(TaskPool& pool) const;
 };
+
+// Coarsest first, each level of nested `levels` (keyed by count) made no worse than the
+// next coarser one (PreparedMotion::LiftCoarserLevel): adding joints never raises the error.
+Status LiftCoarserLevels(const core::PreparedMotion& prepared, std::map<int, core::LevelResult>& levels);
 
 // The default ladder for n joints and the minimum the locks allow: n, ~3n/4, ~n/2, ~n/4,
 // clamped to [minimum, n], duplicates removed, finest first (the smallest useful level is

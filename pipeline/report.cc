@@ -80,16 +80,22 @@ StatusOr<std::string> EncodeSolvedLevels(const core::Character& character,
   return proto::EncodeLevelSet(set, run);
 }
 
-json RankingTable(const core::Character& character, const core::JointRanking& ranking) {
+json RankingTable(const core::Character& character, core::RankingMethod method,
+                  const core::JointRanking& ranking, const core::JointRanking& paper) {
+  std::vector<int> paper_rank(paper.removal_order.size());
+  for (size_t r = 0; r < paper.removal_order.size(); ++r) paper_rank[paper.removal_order[r]] = static_cast<int>(r) + 1;
+  const bool greedy = method == core::RankingMethod::kGreedy;
   json rows = json::array();
   for (size_t r = 0; r < ranking.removal_order.size(); ++r) {
     const int j = ranking.removal_order[r];
     rows.push_back({{"rank", r + 1},
                     {"joint", character.skeleton().joint_names[j]},
                     {"index", j},
-                    {"hierarchical", ranking.hierarchical[j]},
-                    {"rotational", ranking.rotational[j]},
-                    {"priority", FiniteOrNull(ranking.priority[j])},
+                    {"removal_error_pct", greedy ? FiniteOrNull(ranking.priority[j]) : json(nullptr)},
+                    {"paper_rank", paper_rank[j]},
+                    {"hierarchical", paper.hierarchical[j]},
+                    {"rotational", paper.rotational[j]},
+                    {"priority", FiniteOrNull(paper.priority[j])},
                     {"removable", std::isfinite(ranking.priority[j])}});
   }
   return rows;
@@ -172,7 +178,8 @@ json BuildReport(const ReportInputs& in) {
     }
     report["variant_curves"] = std::move(curves);
   }
-  report["ranking"] = RankingTable(in.character, in.ranking);
+  report["ranking_method"] = core::RankingMethodName(in.request.ranking_method);
+  report["ranking"] = RankingTable(in.character, in.request.ranking_method, in.ranking, in.paper_ranking);
   report["warnings"] = in.warnings;
   return report;
 }

@@ -35,7 +35,8 @@ struct ReportInputs {
   const BakeRequest& request;
   const core::Character& character;
   const core::Motion& motion;
-  const core::JointRanking& ranking;
+  const core::JointRanking& ranking;        // the one the levels follow (request.ranking_method)
+  const core::JointRanking& paper_ranking;  // the paper's, for the table beside it
   const core::PreparedMotion& prepared;
   const std::vector<int>& counts;  // finest first
   const std::map<int, core::LevelResult>& levels;
@@ -61,7 +62,10 @@ StatusOr<std::string> EncodeSolvedLevels(const core::Character& character,
 
 nlohmann::json BuildReport(const ReportInputs& inputs);
 
-// The joint priority table (fig. 2) as JSON rows, lowest priority first.
-nlohmann::json RankingTable(const core::Character& character, const core::JointRanking& ranking);
+// The removal order `ranking` (made by `method`) as JSON rows, first removed first, each
+// with the greedy removal's error (null for the paper's order) and the paper's rank and
+// priority (fig. 2) from `paper`.
+nlohmann::json RankingTable(const core::Character& character, core::RankingMethod method,
+                            const core::JointRanking& ranking, const core::JointRanking& paper);
 
 }  // namespace motionlod::pipeline

@@ -20,6 +20,7 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include "core/greedy_ranking.h"
 #include "core/solve_levels.h"
 #include "io/asset.h"
 #include "io/sha256.h"
@@ -47,6 +48,7 @@ struct CommonOptions {
   std::string animation;
   double fps = 0;
   std::vector<std::string> locked;
+  std::string ranking = "greedy";
   int threads = 0;
   core::SimdChoice simd = core::SimdChoice::kWidest;  // from MOTIONLOD_SIMD
 };
@@ -59,6 +61,9 @@ void AddCommon(CLI::App* app, CommonOptions& o) {
   app->add_option("--fps", o.fps, "sampling rate in frames per second (default: the source's)")
       ->check(CLI::Range(0.0, 1000.0));
   app->add_option("--lock", o.locked, "joints no level removes (sockets, IK targets)")->delimiter(',');
+  app->add_option("--ranking", o.ranking,
+                  "removal order: greedy (by the solved error) or paper (subtree length x rotation)")
+      ->capture_default_str();
   app->add_option("--threads", o.threads, "worker threads (default: one per core)")->check(CLI::NonNegativeNumber);
 }
 
@@ -101,6 +106,9 @@ StatusOr<pipeline::BakeRequest> MakeRequest(const CommonOptions& o) {
   request.animation = o.animation;
   request.fps = o.fps;
   request.locked_joints = o.locked;
+  auto ranking = core::ParseRankingMethod(o.ranking);
+  if (!ranking.ok()) return ranking.status();
+  request.ranking_method = *ranking;
   request.threads = o.threads;
   request.simd = o.simd;
   request.character_label = std::filesystem::path(o.character).filename().string();
@@ -148,21 +156,34 @@ int RunRank(const CommonOptions& o, bool as_json) {
   if (!request.ok()) return Fail(request.status());
   auto inputs = pipeline::PrepareInputs(*request);
   if (!inputs.ok()) return Fail(inputs.status());
-  auto ranking = core::RankJointsJob{inputs->character.get(), &inputs->motion, o.locked, o.simd}.Run();
-  if (!ranking.ok()) return Fail(ranking.status());
-  const nlohmann::json table = pipeline::RankingTable(*inputs->character, *ranking);
+  auto paper = core::RankJointsJob{inputs->character.get(), &inputs->motion, o.locked, o.simd}.Run();
+  if (!paper.ok()) return Fail(paper.status());
+  core::JointRanking ranking = *paper;
+  if (request->ranking_method == core::RankingMethod::kGreedy) {
+    // Greedy by the default variant's error, as a bake with default settings removes them.
+    auto prepared = core::PreparedMotion::Create(inputs->character, inputs->motion, request->settings, o.simd);
+    if (!prepared.ok()) return Fail(prepared.status());
+    auto greedy = core::GreedyRankingJob{prepared->get(), o.locked}.Run();
+    if (!greedy.ok()) return Fail(greedy.status());
+    ranking = *std::move(greedy);
+  }
+  const nlohmann::json table =
+      pipeline::RankingTable(*inputs->character, request->ranking_method, ranking, *paper);
   if (as_json) {
     std::cout << table.dump(2) << "\n";
     return 0;
   }
-  std::printf("%4s  %-28s %12s %12s %12s\n", "rank", "joint", "hierarchical", "rotational", "priority");
+  std::printf("%4s  %-28s %10s %6s %12s %12s %12s\n", "rank", "joint", "error%", "paper",
+              "hierarchical", "rotational", "priority");
   for (const auto& row : table) {
-    const std::string priority = row["priority"].is_null()
-                                     ? std::string(row["index"] == 0 ? "root" : "locked")
-                                     : std::to_string(row["priority"].get<double>());
-    std::printf("%4d  %-28s %12.4f %12.4f %12s\n", row["rank"].get<int>(),
-                row["joint"].get<std::string>().c_str(), row["hierarchical"].get<double>(),
-                row["rotational"].get<double>(), priority.c_str());
+    const auto text = [&](const nlohmann::json& value) {
+      return value.is_null() ? std::string(!row["removable"].get<bool>() ? (row["index"] == 0 ? "root" : "locked") : "-")
+                             : std::to_string(value.get<double>());
+    };
+    std::printf("%4d  %-28s %10s %6d %12.4f %12.4f %12s\n", row["rank"].get<int>(),
+                row["joint"].get<std::string>().c_str(), text(row["removal_error_pct"]).c_str(),
+                row["paper_rank"].get<int>(), row["hierarchical"].get<double>(),
+                row["rotational"].get<double>(), text(row["priority"]).c_str());
   }
   return 0;
 }

@@ -9,6 +9,7 @@
 
 #include <cstddef>
 #include <limits>
+#include <span>
 #include <vector>
 
 #include "base/pieces.h"
@@ -36,6 +37,11 @@ void EvaluateErrors(const PreparedData& d, const DeltaView& delta, const std::ve
 
 // The joint pairs whose both joints' Delta can be nonzero: the others add nothing.
 std::vector<size_t> ActivePairs(const PreparedData& d, const DeltaView& delta);
+
+// The figures of a motion's clips (LevelErrors::per_clip, each of its own frames, in the
+// order of `clips`): the worst clip's figures, every frame's per-frame parts, and the
+// clips themselves as per_clip.
+LevelErrors WorstOverClips(std::vector<LevelErrors> per_clip, std::span<const MotionClip> clips);
 
 // The figures that follow from the per-frame parts of E (e, mean_e, max_e, the RMS error)
 // and, where given, from the sample's sums.

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <memory>
+#include <span>
 #include <utility>
 #include <vector>
 
@@ -43,7 +44,18 @@ struct PreparedData {
   double alpha = 1, beta = 1;
   double beta_fit = 1;  // beta where the variant fits normals, else 0
   ErrorSample sample;   // the sampled figures' frames and vertices
+  // Motion::Clips(), and with more than one, each clip's frames prepared on their own
+  // (SelectFrames): a level's figures per clip are evaluated on its part.
+  std::vector<MotionClip> clips;
+  std::vector<std::shared_ptr<const PreparedMotion>> clip_parts;
 };
+
+// The prepared motion on the given frames (ascending, each in [0, T)) as one clip: alpha
+// and beta stay the motion's and the normal matrix does not depend on the frames, so a
+// level solved on it has the full motion's solution on those frames, to rounding. Costs a
+// copy of those frames' columns and a new sample, not a Create.
+StatusOr<std::shared_ptr<const PreparedMotion>> SelectFrames(const PreparedData& d,
+                                                             std::span<const int> frames);
 
 // Delta_k(t) = S_k(t) - K_k(t) for every original joint k, read from the matrices S it
 // compares with the originals instead of materialised: a long motion's 4n x 3T

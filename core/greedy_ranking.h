@@ -1,0 +1,50 @@
+// Step 1 by error (beyond the paper): the removal order that, at each step, removes the
+// joint whose removal raises the level's optimised maximum vertex error least, over every
+// clip of the motion. The paper's order (core/rank_joints.h) predicts the error from each
+// joint's subtree length and rotation; it removes short, fast end joints early, removes a
+// chain's links one after another and protects trunk joints whose removal costs little.
+//
+// Each step scores every candidate (a kept joint, never the root or a locked one) by
+// solving the level without it (the variant's own solution, step 4) on the probe frames
+// and taking its maximum vertex error; the lowest wins, ties by the lower mean E, then the
+// higher joint index. Exact, with three savings that change no choice:
+//   - the probe: up to probe_frames_per_clip evenly spaced frames of each clip (0: all);
+//   - candidates are tried in the order of their last score, so the best is found early;
+//   - a candidate's maximum is only decided against the best so far (the search stops at
+//     the first vertex past it, core/internal/max_vertex_error.h), and found exactly
+//     only when it is within it.
+// The naive reference, every candidate scored by PreparedMotion::SolveOptimized, is
+// core/reference/greedy_ranking_reference.h.
+#pragma once
+
+#include <span>
+#include <string>
+
+#include "base/pieces.h"
+#include "base/status.h"
+#include "core/rank_joints.h"
+#include "core/solve_levels.h"
+
+namespace motionlod::core {
+
+struct GreedyRankingJob {
+  static constexpr int kDefaultProbeFramesPerClip = 16;
+
+  const PreparedMotion* prepared = nullptr;
+  std::span<const std::string> locked_joints;  // names; never removed
+  int probe_frames_per_clip = kDefaultProbeFramesPerClip;  // >= 0; 0 = every frame
+
+  Status Validate() const;
+  // The order, with JointRanking::priority the probe's maximum vertex error (percent of the
+  // character's height) of the level each joint's removal made, +inf for the root and the
+  // locked joints (hierarchical and rotational are the paper's and stay empty). `run`: the
+  // candidates of a step are scored a few per piece (base/pieces.h); the order is the same
+  // for any runner.
+  StatusOr<JointRanking> Run(const PieceRunner& run = {}) const;
+};
+
+// The probe frames of GreedyRankingJob: up to `per_clip` evenly spaced frames of each clip
+// (its first among them), every frame where per_clip is 0 or the clip is no longer.
+std::vector<int> ProbeFrames(std::span<const MotionClip> clips, int per_clip);
+
+}  // namespace motionlod::core

@@ -1,0 +1,52 @@
+#include "core/reference/greedy_ranking_reference.h"
+
+#include <limits>
+#include <memory>
+#include <vector>
+
+#include "core/internal/prepared_data.h"
+#include "core/reduce_skeleton.h"
+
+namespace motionlod::core {
+
+StatusOr<JointRanking> GreedyRankingReference(const GreedyRankingJob& job) {
+  const Character& c = job.prepared->character();
+  const int n = c.joint_count();
+  auto probe = internal::SelectFrames(job.prepared->data(),
+                                      ProbeFrames(job.prepared->clips(), job.probe_frames_per_clip));
+  if (!probe.ok()) return probe.status();
+  JointRanking ranking;
+  ranking.priority.assign(n, std::numeric_limits<double>::infinity());
+  std::vector<bool> locked(n, false), keep(n, true);
+  locked[0] = true;
+  for (const std::string& name : job.locked_joints) locked[c.FindJoint(name)] = true;
+  for (int j = 0; j < n; ++j) ranking.locked_count += locked[j];
+  for (int step = 0; step < n - ranking.locked_count; ++step) {
+    int best = -1;
+    double best_max = 0, best_mean_e = 0;
+    for (int j = n - 1; j >= 0; --j) {  // ties go to the higher index: the first found
+      if (!keep[j] || locked[j]) continue;
+      const auto flags = std::make_unique<bool[]>(n);
+      for (int k = 0; k < n; ++k) flags[k] = keep[k] && k != j;
+      auto level = ReduceSkeleton(c, std::span<const bool>(flags.get(), n));
+      if (!level.ok()) return level.status();
+      auto solved = (*probe)->SolveOptimized(*level);
+      if (!solved.ok()) return solved.status();
+      const double max = solved->optimized.max_vertex_error_pct, mean_e = solved->optimized.mean_e;
+      if (best < 0 || max < best_max || (max == best_max && mean_e < best_mean_e)) {
+        best = j;
+        best_max = max;
+        best_mean_e = mean_e;
+      }
+    }
+    keep[best] = false;
+    ranking.priority[best] = best_max;
+    ranking.removal_order.push_back(best);
+  }
+  for (int j = n - 1; j >= 0; --j) {
+    if (locked[j]) ranking.removal_order.push_back(j);
+  }
+  return ranking;
+}
+
+}  // namespace motionlod::core

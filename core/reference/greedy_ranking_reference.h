@@ -1,0 +1,17 @@
+// The naive reference for the greedy removal order (core/greedy_ranking.h): at each step
+// every candidate's level is solved with every figure (PreparedMotion::SolveOptimized on
+// the probe frames) and the lowest (maximum vertex error, mean E, then the higher index)
+// is removed.
+#pragma once
+
+#include <span>
+#include <string>
+
+#include "core/greedy_ranking.h"
+
+namespace motionlod::core {
+
+// Expects a valid job (GreedyRankingJob::Validate); the order and the priorities.
+StatusOr<JointRanking> GreedyRankingReference(const GreedyRankingJob& job);
+
+}  // namespace motionlod::core
