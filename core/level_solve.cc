@@ -175,12 +175,11 @@ void StoreMatrices(const MatrixXd& x, int m, int frames, RowMajorAffine34f* out)
   }
 }
 
-// Whether candidate figures are no worse than the reparented level's in every figure the
-// guarantee covers.
+// Whether candidate figures are no worse than the reparented level's in the figures the
+// guarantee covers: the maximum and the mean vertex error.
 bool NoWorseThan(const LevelErrors& candidate, const LevelErrors& baseline) {
   return candidate.max_vertex_error_pct <= baseline.max_vertex_error_pct &&
-         candidate.mean_vertex_error_pct <= baseline.mean_vertex_error_pct &&
-         candidate.mean_e <= baseline.mean_e;
+         candidate.mean_vertex_error_pct <= baseline.mean_vertex_error_pct;
 }
 
 }  // namespace
@@ -223,6 +222,8 @@ StatusOr<LevelErrors> PreparedMotion::BaselineErrors(const ReducedSkeleton& leve
 
 void PreparedMotion::KeepNoWorseThanReparenting(LevelResult& result) const {
   const internal::PreparedData& d = *data_;
+  // Original matrices with scale or shear are no candidate of a rigid level.
+  if (IsRigid(d.settings.variant) && !d.original_rotations) return;
   const int m = result.skeleton.kept_count();
   bool replaced = false;
   for (size_t c = 0; c < d.clips.size(); ++c) {

@@ -8,6 +8,7 @@
 #include "core/internal/block_cholesky.h"
 #include "core/internal/lanes.h"
 #include "core/internal/level_errors.h"
+#include "core/internal/rigid_projection.h"
 #include "core/internal/prepared_data.h"
 #include "core/internal/simd_dispatch.h"
 #include "core/solve_levels.h"
@@ -160,6 +161,7 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
   for (int j = 0; j < n; ++j) {
     d.joint_fit[j] = d.alpha * d.joint_cp[j] + d.beta_fit * d.joint_cn[j];
   }
+  d.original_rotations = internal::AllRotations(d.kt, simd);
   d.clips = motion.Clips();
   if (d.clips.size() > 1) {
     for (const MotionClip& clip : d.clips) {

@@ -178,11 +178,11 @@ class PreparedMotion {
   StatusOr<Eigen::MatrixXd> SolveLeastSquares(const ReducedSkeleton& level) const;
 
   // Step 5b, beyond the paper: a level is never worse than reparenting. Where a clip's
-  // solution has a larger maximum vertex error, mean vertex error or mean E than the
-  // baseline's (possible: least squares minimises the weighted square sum, not the
-  // maximum; the rigid projection and the regulariser move off the minimiser), that clip
-  // takes the baseline's matrices and figures (rigid too in the rigid variants). Needs
-  // result.baseline.
+  // solution has a larger maximum or mean vertex error than the baseline's (possible:
+  // least squares minimises the weighted square sum, not the maximum; the rigid projection
+  // and the regulariser move off the minimiser), that clip takes the baseline's matrices
+  // and figures; in the rigid variants only where the original matrices are rotations.
+  // Needs result.baseline.
   void KeepNoWorseThanReparenting(LevelResult& result) const;
   // `finer` keeps every joint `coarser` keeps: each clip whose maximum vertex error is
   // above the coarser level's takes the coarser level's matrices (each kept joint its

@@ -105,7 +105,8 @@ TEST(Reference, LevelFiguresMatchTheSkinnedMesh) {
     const auto prepared = Prepare(s, variant);
     for (int kept = 1; kept <= s.character->joint_count(); ++kept) {
       const ReducedSkeleton level = *ReduceSkeletonToCount(*s.character, s.ranking, kept);
-      const LevelResult result = *prepared->SolveLevel(level);
+      LevelResult result = *prepared->SolveOptimized(level);
+      result.baseline = *prepared->BaselineErrors(level);
       const auto solution = internal::SolveVariant(prepared->data(), level);
       ASSERT_TRUE(solution.ok());
       const std::string where = std::string(VariantName(variant)) + " kept " + std::to_string(kept);
@@ -157,7 +158,7 @@ TEST(SmallestLevel, FindsTheFewestJointsWithinTheBound) {
   const int n = s.character->joint_count();
   std::vector<double> maximum(n + 1, 0.0);
   for (int kept = 1; kept <= n; ++kept) {
-    maximum[kept] = prepared->SolveLevel(*ReduceSkeletonToCount(*s.character, s.ranking, kept))
+    maximum[kept] = prepared->SolveOptimized(*ReduceSkeletonToCount(*s.character, s.ranking, kept))
                         ->optimized.max_vertex_error_pct;
   }
   for (double bound : {maximum[2] * 1.01, maximum[4] * 1.01, maximum[1] * 2}) {
