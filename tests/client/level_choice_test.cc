@@ -66,7 +66,9 @@ void ExpectOneChoice(Client& client, const api::BakeInfo& bake) {
     const api::LevelEntry& level = bake.levels[static_cast<size_t>(proto_choice)];
     EXPECT_TRUE(level.chosen) << px << " px";
     EXPECT_GT(px, level.px_min.value_or(std::numeric_limits<double>::infinity())) << px << " px";
-    if (level.px_max) EXPECT_LE(px, *level.px_max) << px << " px";
+    if (level.px_max) {
+      EXPECT_LE(px, *level.px_max) << px << " px";
+    }
   }
 }
 
