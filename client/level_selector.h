@@ -3,12 +3,13 @@
 // with hysteresis so that a character hovering at a threshold does not switch level
 // every frame.
 //
-// Rule (levels finest first, l = 0 the finest): the plain choice is SelectLevel, the
-// coarsest level whose max vertex error at `px` pixels is within the budget. A character
-// moves to a finer level as soon as its current one exceeds the budget (the budget is
-// never broken for the sake of stability), but to a coarser one only when that level
-// would still be within the budget at px x (1 + hysteresis): it must shrink by that
-// margin past the threshold before it gets coarser again.
+// Rule (levels finest first, l = 0 the finest): the plain choice is proto::SelectLevel,
+// the coarsest level whose max vertex error at `px` pixels is within the budget (the
+// coarsest of the most accurate levels when none is), the daemon's and the viewer's
+// choice too. A character moves to a finer level as soon as its current one exceeds the
+// budget (the budget is never broken for the sake of stability), but to a coarser one
+// only when that level would still be within the budget at px x (1 + hysteresis): it
+// must shrink by that margin past the threshold before it gets coarser again.
 #pragma once
 
 #include <vector>

@@ -16,6 +16,7 @@
 #include <cmath>
 #include <cstdio>
 #include <iostream>
+#include <optional>
 #include <string>
 
 #include <CLI/CLI.hpp>
@@ -76,21 +77,33 @@ Result<api::BakeInfo> WaitWithProgressBar(Client& client, const std::string& job
   return client.WaitForBake(job_id, [&bar](const api::JobStatus& status) { bar.Show(status); });
 }
 
+// "(px_min, px_max]" of a chosen level, in tenths of a pixel. Two levels whose errors
+// differ in the fifth digit leave the finer one a sliver of heights that would print as
+// an empty range such as (71.0, 71.0]: "only ~71.0" says what it is.
+std::string PixelRange(double px_min, const std::optional<double>& px_max) {
+  auto tenths = [](double value) {
+    char buffer[32];
+    std::snprintf(buffer, sizeof buffer, "%.1f", value);
+    return std::string(buffer);
+  };
+  if (!px_max) return "(" + tenths(px_min) + ", inf]";
+  if (tenths(px_min) == tenths(*px_max)) return "only ~" + tenths(*px_max);
+  return "(" + tenths(px_min) + ", " + tenths(*px_max) + "]";
+}
+
 void PrintLevels(const api::BakeInfo& bake) {
   std::printf("bake %s: %s, %d frames at %g fps, variant %s\n", bake.id.c_str(),
               bake.state.c_str(), bake.frames, bake.fps, bake.variant.c_str());
   if (bake.levels.empty()) return;
-  std::printf("%5s %6s %10s %10s %13s  %s\n", "level", "joints", "max err %", "px (1 px)",
+  std::printf("%5s %6s %10s %10s %17s  %s\n", "level", "joints", "max err %", "px (1 px)",
               "chosen for px", "hash");
   for (const api::LevelEntry& level : bake.levels) {
     const std::string limit =
         level.max_px_for_1px_error ? std::to_string(std::lround(*level.max_px_for_1px_error)) : "exact";
-    std::string range = "-";
-    if (level.chosen) {
-      range = "(" + std::to_string(std::lround(level.px_min)) + ", " +
-              (level.px_max ? std::to_string(std::lround(*level.px_max)) : std::string("inf")) + "]";
-    }
-    std::printf("%5d %6d %10.3f %10s %13s  %s\n", level.index, level.joints,
+    // A level no height picks (a coarser level is as accurate) has no range.
+    const std::string range =
+        level.chosen && level.px_min ? PixelRange(*level.px_min, level.px_max) : "never";
+    std::printf("%5d %6d %10.3f %10s %17s  %s\n", level.index, level.joints,
                 level.max_vertex_error_pct, limit.c_str(), range.c_str(), level.hash.c_str());
   }
 }

@@ -190,7 +190,7 @@ void to_json(json& j, const LevelEntry& v) {
            {"mean_E", v.mean_e},
            {"max_px_for_1px_error", OptionalNumber(v.max_px_for_1px_error)},
            {"chosen", v.chosen},
-           {"px_min", v.px_min},
+           {"px_min", OptionalNumber(v.px_min)},
            {"px_max", OptionalNumber(v.px_max)},
            {"hash", v.hash},
            {"bytes", v.bytes},

@@ -107,10 +107,12 @@ struct LevelEntry {
   double mean_e = 0;
   // Tallest on-screen height (px) within the 1 px budget; nullopt when the level is exact.
   std::optional<double> max_px_for_1px_error;
-  // With the default 1 px budget the level is chosen for heights in (px_min, px_max];
-  // px_max nullopt: unbounded. `chosen` false: a coarser level serves its whole range.
+  // With the default 1 px budget proto::SelectLevel picks the level for the heights in
+  // (px_min, px_max] (proto::LevelRanges): px_max nullopt for the level that serves every
+  // larger height. `chosen` false: picked at no height (a coarser level is as accurate),
+  // and both bounds are nullopt.
   bool chosen = false;
-  double px_min = 0;
+  std::optional<double> px_min;
   std::optional<double> px_max;
   std::string hash;  // /v1/levels/{hash}: the one-level file
   uint64_t bytes = 0;

@@ -9,6 +9,7 @@
 #pragma once
 
 #include <span>
+#include <vector>
 
 namespace motionlod::proto {
 
@@ -26,10 +27,35 @@ double PixelHeight(const CameraView& view);
 // (a fraction of the character's height) stays within `budget_px`; +inf when exact.
 double MaxPixelHeightForBudget(double max_vertex_error_fraction, double budget_px);
 
-// Levels ordered finest first (index 0 the full or finest skeleton). Returns the index of
-// the coarsest level whose max deviation at `pixel_height` is within `budget_px`, and 0
-// when none is (the finest level is the best available).
+// The level choice, the one every consumer makes (the server's `level?px=` and level table,
+// the client's LevelSelector, the viewer's crowd in web/src/level_choice.js). Levels are
+// ordered finest first (index 0 the full or finest skeleton); level l's limit is
+// MaxPixelHeightForBudget(max_vertex_error_fraction[l], budget_px). At `pixel_height` the
+// choice is
+//   * the coarsest level within the budget there (pixel_height <= its limit);
+//   * when none is (taller than every limit), the coarsest of the most accurate levels
+//     (those with the largest limit): the best a taller character can get.
+// That is, the coarsest l whose limit is >= min(pixel_height, the largest limit). The rule
+// does not assume that errors grow as levels get coarser: a coarser level can be exact
+// (it drops only joints that move no vertex, such as pole targets) or more accurate than
+// a finer one, and then the finer one is never chosen. The choice only gets finer as
+// pixel_height grows, so each level is chosen on one interval of heights (LevelRanges).
+// Errors are finite and >= 0 (the level format's rule), budget_px > 0; a NaN height gets
+// the most accurate level. 0 for an empty table.
 int SelectLevel(std::span<const double> max_vertex_error_fraction, double pixel_height,
                 double budget_px);
+
+// The on-screen heights (pixels) at which SelectLevel picks a level: (px_min, px_max].
+struct LevelRange {
+  bool chosen = false;  // false: picked at no height (a coarser level is as accurate); 0, 0
+  double px_min = 0;    // exclusive
+  double px_max = 0;    // inclusive; +inf for the level that serves every larger height
+};
+
+// One range per level, finest first. The chosen levels' ranges partition (0, +inf): none
+// is empty, none overlaps another, the coarsest level's starts at 0, each next finer
+// chosen level's starts where the previous one ends, and the last one is unbounded.
+std::vector<LevelRange> LevelRanges(std::span<const double> max_vertex_error_fraction,
+                                    double budget_px);
 
 }  // namespace motionlod::proto

@@ -1,7 +1,7 @@
 #include "server/levels.h"
 
-#include <algorithm>
 #include <cmath>
+#include <vector>
 
 #include "proto/level_selection.h"
 #include "io/sha256.h"
@@ -32,12 +32,11 @@ StatusOr<std::shared_ptr<const Levels::Table>> Levels::GetTable(const BakeRecord
   }
   auto table = std::make_shared<Table>();
   const size_t count = levels->size();
-  std::vector<double> limits(count);
   for (size_t l = 0; l < count; ++l) {
     const json& level = report["levels"][l];
     const double pct = level.value("max_vertex_error_pct", 0.0);
     table->max_error_fraction.push_back(pct / 100.0);
-    limits[l] = proto::MaxPixelHeightForBudget(pct / 100.0, 1.0);
+    const double limit = proto::MaxPixelHeightForBudget(pct / 100.0, 1.0);
     api::LevelEntry entry;
     entry.index = static_cast<int>(l);
     entry.joints = (*levels)[l].joints;
@@ -45,25 +44,19 @@ StatusOr<std::shared_ptr<const Levels::Table>> Levels::GetTable(const BakeRecord
     entry.mean_vertex_error_pct = level.value("mean_vertex_error_pct", 0.0);
     entry.mean_normal_error_deg = level.value("mean_normal_error_deg", 0.0);
     entry.mean_e = level.value("mean_E", 0.0);
-    if (std::isfinite(limits[l])) entry.max_px_for_1px_error = limits[l];
+    if (std::isfinite(limit)) entry.max_px_for_1px_error = limit;
     entry.hash = (*levels)[l].hash;
     entry.bytes = static_cast<uint64_t>((*levels)[l].bytes);
     table->entries.push_back(std::move(entry));
   }
-  // proto::SelectLevel picks the coarsest level l with err_l * px <= budget, the finest
-  // when none: level l > 0 serves (max_{k>l} limit_k, limit_l], level 0 everything above
-  // the coarser levels' limits.
+  // The heights Choose picks each level for at the default budget: one definition.
+  const std::vector<proto::LevelRange> ranges = proto::LevelRanges(table->max_error_fraction, 1.0);
   for (size_t l = 0; l < count; ++l) {
-    double lower = 0;
-    for (size_t k = l + 1; k < count; ++k) lower = std::max(lower, limits[k]);
+    if (!ranges[l].chosen) continue;
     api::LevelEntry& entry = table->entries[l];
-    entry.px_min = lower;
-    if (l == 0) {
-      entry.chosen = true;
-    } else {
-      entry.chosen = lower < limits[l];
-      if (std::isfinite(limits[l])) entry.px_max = limits[l];
-    }
+    entry.chosen = true;
+    entry.px_min = ranges[l].px_min;
+    if (std::isfinite(ranges[l].px_max)) entry.px_max = ranges[l].px_max;
   }
   std::lock_guard lock(tables_mutex_);
   if (tables_.size() >= kLevelTableEntries) tables_.clear();

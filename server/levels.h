@@ -1,5 +1,5 @@
 // Levels of baked level sets: a bake's level table (error figures and the on-screen
-// heights each level serves), the level core::SelectLevel picks for a height, the
+// heights each level serves), the level proto::SelectLevel picks for a height, the
 // one-level files by hash, and a level exported as glTF.
 #pragma once
 
@@ -21,7 +21,7 @@ class Levels {
  public:
   Levels(ServiceContext& context, Jobs& jobs) : context_(context), jobs_(jobs) {}
 
-  // core::SelectLevel on the bake's level table for a character `px` pixels tall.
+  // proto::SelectLevel on the bake's level table for a character `px` pixels tall.
   Result<proto::api::LevelChoice> Choose(const std::string& bake_id, double px, double budget_px);
   // The one-level file of that hash (served from the cache when hot).
   Result<LevelCache::Bytes> Get(const std::string& hash);

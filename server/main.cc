@@ -97,20 +97,20 @@ void Seed(Service& service, const Options& options, const std::string& base_url)
   std::printf("bake (level table): %s/v1/bakes/%s\n", base_url.c_str(), id.c_str());
   if (auto bake = service.bakes().Get(id); bake.ok()) {
     for (const proto::api::LevelEntry& level : bake->levels) {
-      std::string drawn = "never (a coarser level is as good)";
-      if (level.chosen) {
+      std::string drawn = "never (a coarser level is as accurate)";
+      if (level.chosen && level.px_min) {
         char range[96];
-        if (level.px_max && *level.px_max - level.px_min < 0.05) {
-          // Two levels whose errors differ in the fifth digit share their limit: the finer
-          // one serves a range too narrow to print.
+        if (level.px_max && *level.px_max - *level.px_min < 0.05) {
+          // Two levels whose errors differ in the fifth digit have almost the same limit:
+          // the finer one serves a range too narrow to print.
           std::snprintf(range, sizeof range,
                         "only within 0.05 px of %.1f px (a coarser level is almost as good)",
-                        level.px_min);
+                        *level.px_min);
         } else if (level.px_max) {
           std::snprintf(range, sizeof range, "for heights above %.1f px up to %.1f px",
-                        level.px_min, *level.px_max);
+                        *level.px_min, *level.px_max);
         } else {
-          std::snprintf(range, sizeof range, "for heights above %.1f px", level.px_min);
+          std::snprintf(range, sizeof range, "for heights above %.1f px", *level.px_min);
         }
         drawn = range;
       }

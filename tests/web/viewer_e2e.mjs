@@ -19,6 +19,7 @@ import fs from 'node:fs';
 import { createRequire } from 'node:module';
 import os from 'node:os';
 import path from 'node:path';
+import { pathToFileURL } from 'node:url';
 
 const env = (name, fallback) => {
   const value = process.env[name] ?? fallback;
@@ -42,6 +43,8 @@ for (const [what, file, hint] of [
   assert.ok(fs.existsSync(file), `${what} is missing (${file}): ${hint}`);
 }
 const { chromium } = createRequire(path.join(sourceDir, 'web', 'package.json'))('playwright-core');
+// The crowd's level choice, as the page runs it.
+const { selectLevel } = await import(pathToFileURL(path.join(sourceDir, 'web', 'src', 'level_choice.js')));
 
 const results = { passed: 0, failed: 0 };
 async function check(name, body) {
@@ -85,6 +88,55 @@ async function api(base, route, headers = {}) {
   const response = await fetch(base + route, { headers: { Accept: 'application/json', ...headers } });
   assert.equal(response.status, 200, `${route}: ${response.status} ${await response.clone().text()}`);
   return response.json();
+}
+
+async function bakeOverApi(base, request) {
+  const submitted = await fetch(`${base}/v1/bakes`, {
+    method: 'POST',
+    headers: { 'Content-Type': 'application/json' },
+    body: JSON.stringify(request),
+  });
+  assert.equal(submitted.status, 202, await submitted.clone().text());
+  let status = await submitted.json();
+  while (status.state !== 'succeeded' && status.state !== 'failed') {
+    status = await api(base, `/v1/jobs/${status.id}?wait=20&after=${status.version}`);
+  }
+  assert.equal(status.state, 'succeeded', JSON.stringify(status.error));
+  return api(base, `/v1/bakes/${status.id}`);
+}
+
+// The level table's ranges partition (0, inf), and at heights across them (every bound, the
+// next double either side, and between) the page's choice (web/src/level_choice.js), the
+// daemon's `level?px=` and the range holding the height name the same level.
+async function expectOneLevelChoice(base, bake) {
+  const chosen = bake.levels.filter((level) => level.chosen).sort((a, b) => a.px_min - b.px_min);
+  assert.ok(chosen.length > 0);
+  assert.equal(chosen[0].px_min, 0);
+  for (let k = 0; k < chosen.length; ++k) {
+    const { px_min: low, px_max: high } = chosen[k];
+    if (k + 1 < chosen.length) {
+      assert.ok(high !== null && low < high, `level ${chosen[k].index}: empty range (${low}, ${high}]`);
+      assert.equal(chosen[k + 1].px_min, high, `level ${chosen[k + 1].index}: a gap or an overlap`);
+    } else {
+      assert.equal(high, null, 'the finest chosen level serves every larger height');
+    }
+  }
+  for (const level of bake.levels.filter((l) => !l.chosen)) {
+    assert.equal(level.px_min, null);
+    assert.equal(level.px_max, null);
+  }
+  const heights = [0.25, 3, 40, 700, 1e6];
+  for (const { px_max: bound } of chosen) {
+    if (bound !== null) heights.push(bound, bound * (1 - 1e-15), bound * (1 + 1e-15), bound * 0.8);
+  }
+  for (const px of heights.filter((h) => h > 0 && h <= 1e6)) {
+    const daemon = await api(base, `/v1/bakes/${bake.id}/level?px=${px}`);
+    const page = selectLevel(bake.levels, px);
+    const level = bake.levels[page];
+    assert.equal(page, daemon.index, `${px} px: the page picks ${page}, the daemon ${daemon.index}`);
+    assert.ok(level.chosen && px > level.px_min && (level.px_max === null || px <= level.px_max),
+      `${px} px outside the range of level ${page}`);
+  }
 }
 
 // ---- page helpers ----------------------------------------------------------------------
@@ -161,6 +213,11 @@ try {
   };
   const page = await browser.newPage({ viewport: { width: 1360, height: 1000 }, deviceScaleFactor: 1 });
   const { consoleErrors, cspViolations } = await watch(page);
+  // Every request of the page answered 404 (the favicon included): none is expected.
+  const notFound = [];
+  page.on('response', (response) => {
+    if (response.status() === 404) notFound.push(response.url());
+  });
   // The headers of the first response for the page and each of its files.
   const viewerResponses = new Map();
   page.on('response', (response) => {
@@ -181,6 +238,10 @@ try {
     assert.equal(response.status(), 200);
     assert.match(response.headers()['content-type'], /^text\/html/);
     await page.waitForSelector('#drop-zone');
+    const icon = await page.$eval('link[rel="icon"]', (link) => link.href);
+    const served = await fetch(icon);
+    assert.equal(served.status, 200, `the favicon ${icon}`);
+    assert.match(served.headers.get('content-type'), /^image\/svg\+xml/);
   });
 
   await check('the viewer and its files carry the security headers', async () => {
@@ -294,7 +355,15 @@ try {
       const limit = level.max_px_for_1px_error;
       assert.equal(shown.max_px_for_1px_error.value === '' ? null : Number(shown.max_px_for_1px_error.value), limit);
       assert.match(shown.max_vertex_error_pct.text, new RegExp(`^${level.max_vertex_error_pct.toFixed(3)} `));
-      if (level.chosen) assert.ok(shown.px_range.text.startsWith(`(${level.px_min.toFixed(1)}, `), shown.px_range.text);
+      // (px_min, px_max] in tenths; a sliver that would print empty says what it is.
+      if (level.chosen && level.px_max !== null && level.px_min.toFixed(1) === level.px_max.toFixed(1)) {
+        assert.ok(shown.px_range.text.startsWith(`only about ${level.px_max.toFixed(1)} px`), shown.px_range.text);
+      } else if (level.chosen) {
+        const high = level.px_max === null ? '∞' : level.px_max.toFixed(1);
+        assert.equal(shown.px_range.text, `(${level.px_min.toFixed(1)}, ${high}] px`);
+      } else {
+        assert.match(shown.px_range.text, /^never/);
+      }
       assert.ok((await page.textContent('#level-label')).includes(`${level.joints} of ${bake.levels[0].joints}`));
     }
     await moveSlider(page, bake.levels.length - 1);
@@ -332,6 +401,10 @@ try {
     await page.locator('#curves').screenshot({ path: path.join(outputDir, 'curves.png') });
   });
 
+  await check('the page\'s level choice is the daemon\'s across the level table', async () => {
+    await expectOneLevelChoice(base, bake);
+  });
+
   await check('the crowd uses the level the daemon selects for each height', async () => {
     await page.waitForFunction(() => window.motionlodViewer.crowdMembers.length > 0, null, { timeout: 120000 });
     const members = await page.evaluate(() => window.motionlodViewer.crowdMembers);
@@ -353,28 +426,43 @@ try {
     await page.locator('#crowd').screenshot({ path: path.join(outputDir, 'crowd.png') });
   });
 
-  await check('another variant\'s bake joins the curve; a bake opens from the list', async () => {
-    const submitted = await fetch(`${base}/v1/bakes`, {
-      method: 'POST',
-      headers: { 'Content-Type': 'application/json' },
-      body: JSON.stringify({ character: bake.character, motion: bake.motion, variant: 'vp' }),
+  await check('a bake without the full level shows its finest level in place of the original', async () => {
+    // Two levels, neither with every joint, opened from the page's list (no uploaded file
+    // to stand in for the original).
+    const all = bake.levels[0].joints;
+    const partial = await bakeOverApi(base, {
+      character: bake.character, motion: bake.motion, variant: bake.variant, levels: [all - 3, 5],
     });
-    assert.equal(submitted.status, 202, await submitted.clone().text());
-    const job = await submitted.json();
-    let status = job;
-    while (status.state !== 'succeeded' && status.state !== 'failed') {
-      status = await api(base, `/v1/jobs/${job.id}?wait=20&after=${status.version}`);
+    await expectOneLevelChoice(base, partial);
+    await page.goto(`${base}/`);
+    await page.waitForFunction((wanted) => [...document.querySelectorAll('#bake-list option')].some((o) => o.value === wanted), partial.id);
+    await page.selectOption('#bake-list', partial.id);
+    await page.waitForFunction((wanted) => window.motionlodViewer.state.bake?.id === wanted, partial.id, { timeout: 120000 });
+    await page.waitForFunction(() => window.motionlodViewer.viewBones.level > 0, null, { timeout: 120000 });
+    const start = await page.evaluate(() => window.motionlodViewer.compareFrames);
+    await page.waitForFunction((n) => window.motionlodViewer.compareFrames > n + 5, start, { timeout: 120000 });
+    for (const selector of ['#view-original', '#view-level']) {
+      const share = await drawnShare(page, selector);
+      console.log(`     ${selector}: ${(share * 100).toFixed(1)}% of the pixels drawn`);
+      assert.ok(share > 0.01, `${selector} is blank (${share})`);
     }
-    assert.equal(status.state, 'succeeded', JSON.stringify(status.error));
+    const finest = partial.levels[0].joints;
+    assert.equal(await page.textContent('#caption-original'), `finest level baked: ${finest} of ${all} joints`);
+    assert.match(await page.textContent('#compare-note'), new RegExp(`no level with all ${all} joints: .*finest level, ${finest} joints`));
+    if (levelsExported) assert.equal((await page.evaluate(() => window.motionlodViewer.viewBones)).original, finest);
+    await page.locator('#compare').screenshot({ path: path.join(outputDir, 'compare-partial.png') });
+  });
+
+  await check('another variant\'s bake joins the curve; a bake opens from the list', async () => {
+    const vp = await bakeOverApi(base, { character: bake.character, motion: bake.motion, variant: 'vp' });
     // Open the vp bake, then the first one again, from the page's list of bakes.
-    for (const id of [job.id, bake.id]) {
+    for (const id of [vp.id, bake.id]) {
       await page.goto(`${base}/`);  // no #bake= in the address: nothing opens by itself
       await page.waitForFunction((wanted) => [...document.querySelectorAll('#bake-list option')].some((o) => o.value === wanted), id);
       await page.selectOption('#bake-list', id);
       await page.waitForFunction((wanted) => window.motionlodViewer.state.bake?.id === wanted, id, { timeout: 120000 });
     }
     await page.waitForFunction(() => document.querySelector('#error-curve path[data-series="vp"]') !== null);
-    const vp = await api(base, `/v1/bakes/${job.id}`);
     const circles = await page.$$eval('#error-curve circle', (cs) => cs.length);
     assert.equal(circles, 2 * bake.levels.length + vp.levels.length);
     await page.waitForFunction(() => window.motionlodViewer.crowdMembers.length > 0, null, { timeout: 120000 });
@@ -389,8 +477,10 @@ try {
     console.log(`     ${((after - before) / 5).toFixed(1)} frames per second (two views and a 300-character crowd)`);
     await page.screenshot({ path: path.join(outputDir, 'page.png'), fullPage: true });
     assert.deepEqual(cspViolations, []);
-    const unexpected = consoleErrors.filter((text) => !/Failed to load resource/.test(text));
+    // A refused upload or bake logs "Failed to load resource" with its 400; a 404 never.
+    const unexpected = consoleErrors.filter((text) => !/Failed to load resource/.test(text) || /404/.test(text));
     assert.deepEqual(unexpected, []);
+    assert.deepEqual(notFound, []);
   });
 } finally {
   await browser?.close();

@@ -36,7 +36,7 @@ export class CompareView {
   }
 
   // Puts a loaded glTF into a view, framed by the original's bounds so both views share
-  // one camera framing.
+  // one camera framing (by the level's while there is no original, else nothing frames it).
   show(view, gltf, animation, bones) {
     if (view.model) view.scene.remove(view.model);
     view.mixer?.stopAllAction();
@@ -46,7 +46,7 @@ export class CompareView {
     const clip = pickClip(gltf, animation);
     view.mixer = new THREE.AnimationMixer(view.model);
     view.action = clip ? view.mixer.clipAction(clip).play() : null;
-    if (view === this.original) this.frame(measure(view.model));
+    if (view === this.original || !this.original.model) this.frame(measure(view.model));
     if (view === this.level && this.original.action && view.action) {
       view.action.time = this.original.action.time;
     }

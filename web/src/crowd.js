@@ -4,7 +4,8 @@
 // instance of that template's skinned pose (see makeTemplates).
 import * as THREE from 'three';
 import { clone as cloneSkinned } from 'three/addons/utils/SkeletonUtils.js';
-import { levelForPixels, measure, pickClip } from './models.js';
+import { levelForPixels } from './level_choice.js';
+import { measure, pickClip } from './models.js';
 
 const kPhases = 3;
 export const kLevelColours = ['#2f6fde', '#22a06b', '#e0a800', '#e8590c', '#c2255c', '#7048e8', '#0c8599', '#5c940d'];

@@ -16,7 +16,8 @@ const state = {
   report: null, // GET /v1/bakes/{id}/report
   levelIndex: 0,
   levelBuffers: [], // per level index: its glTF export's bytes, or null
-  originalBuffer: null, // the all-joints export, else the uploaded .glb, else null
+  originalBuffer: null, // the finest level's export (all joints when baked), else the uploaded .glb, else null
+  originalJoints: null, // the joints of what the left view shows (null: nothing)
   crowdGltfs: [], // per level index: a parsed export for the crowd's templates
   exportError: '', // why the level exports could not be loaded
   busy: false,
@@ -63,6 +64,13 @@ function setProgress(fraction, text) {
   $('progress-text').textContent = text;
 }
 const format = (value, digits) => (value === null || value === undefined ? '—' : Number(value).toFixed(digits));
+// "(px_min, px_max] px" in tenths of a pixel; a sliver that would read as an empty range
+// such as (71.0, 71.0] (two levels whose errors differ in the fifth digit) says so.
+function pixelRange(pxMin, pxMax) {
+  if (pxMax === null) return `(${format(pxMin, 1)}, ∞] px`;
+  if (format(pxMin, 1) === format(pxMax, 1)) return `only about ${format(pxMax, 1)} px (a coarser level is almost as accurate)`;
+  return `(${format(pxMin, 1)}, ${format(pxMax, 1)}] px`;
+}
 
 // ---- 1. Upload ------------------------------------------------------------------------
 
@@ -195,10 +203,13 @@ async function openBake(bakeId) {
   buildCrowd();
 }
 
-// Fetches every level's glTF export; the original is the level with all joints (else
-// the uploaded file, when it is a glTF binary three.js can read as it is).
+// Fetches every level's glTF export. The left view shows the original: the level with all
+// joints, else the uploaded file (when it is a glTF binary three.js can read as it is),
+// else, for a bake without that level (say levels 15,10,5) opened from the list, the
+// finest level baked, which the caption and the note then say.
 async function loadLevels() {
   const { bake } = state;
+  const allJoints = state.character.joints;
   $('compare-note').textContent = 'loading the levels…';
   state.levelBuffers = await Promise.all(
     bake.levels.map((level) =>
@@ -208,23 +219,35 @@ async function loadLevels() {
       }),
     ),
   );
-  const full = bake.levels.findIndex((level) => level.joints === state.character.joints);
-  state.originalBuffer = full >= 0 ? state.levelBuffers[full] : null;
-  if (!state.originalBuffer) {
-    state.originalBuffer = await fetchGlb(levelUrl(bake.id, state.character.joints)).catch(() => null);
-  }
+  // Levels are finest first: the first one exported is the finest there is.
+  const finest = state.levelBuffers.findIndex(Boolean);
   const glb = state.localFiles.find((file) => /\.glb$/i.test(file.name));
-  if (!state.originalBuffer && glb) state.originalBuffer = await glb.arrayBuffer();
+  if (finest >= 0 && bake.levels[finest].joints === allJoints) {
+    state.originalBuffer = state.levelBuffers[finest];
+    state.originalJoints = allJoints;
+  } else if (glb) {
+    state.originalBuffer = await glb.arrayBuffer();
+    state.originalJoints = allJoints;
+  } else {
+    state.originalBuffer = finest >= 0 ? state.levelBuffers[finest] : null;
+    state.originalJoints = finest >= 0 ? bake.levels[finest].joints : null;
+  }
   state.crowdGltfs = await Promise.all(state.levelBuffers.map((buffer) => (buffer ? parseGlb(buffer) : null)));
   if (!state.crowdGltfs.some(Boolean) && state.originalBuffer) state.crowdGltfs = [await parseGlb(state.originalBuffer)];
-  $('compare-note').textContent = state.exportError
-    ? `Level export unavailable (${state.exportError}); the levels are shown with the original mesh.`
-    : '';
+  const notes = [];
+  if (state.exportError) notes.push(`Level export unavailable (${state.exportError}); the levels are shown with the original mesh.`);
+  if (state.originalJoints !== null && state.originalJoints !== allJoints) {
+    notes.push(`This bake has no level with all ${allJoints} joints: the left view shows its finest level, ` +
+      `${state.originalJoints} joints, in place of the original.`);
+  }
+  $('compare-note').textContent = notes.join(' ');
   if (!compare) return;
   if (state.originalBuffer) {
     const original = await parseGlb(state.originalBuffer);
     compare.show(compare.original, original, bake.animation, jointCount(original));
-    $('caption-original').textContent = `original: ${state.character.joints} joints`;
+    $('caption-original').textContent = state.originalJoints === allJoints
+      ? `original: ${allJoints} joints`
+      : `finest level baked: ${state.originalJoints} of ${allJoints} joints`;
   } else {
     compare.clear(compare.original);
     $('caption-original').textContent = 'original: not available';
@@ -243,9 +266,7 @@ async function showLevel(index) {
     let value = level[field];
     if (field === 'px_range') {
       value = null;
-      text = level.chosen
-        ? `(${format(level.px_min, 1)}, ${level.px_max === null ? '∞' : format(level.px_max, 1)}] px`
-        : 'never (a coarser level is as good)';
+      text = level.chosen ? pixelRange(level.px_min, level.px_max) : 'never (a coarser level is as accurate)';
     } else if (field === 'joints' || field === 'bytes') {
       text = `${value}${unit}`;
     } else if (value === null || value === undefined) {

@@ -1,5 +1,4 @@
-// Loading the glTF export of a bake's levels (GET /v1/bakes/{id}/levels/{joints}.glb),
-// and the level a pixel height selects from the bake's level table.
+// Loading the glTF export of a bake's levels (GET /v1/bakes/{id}/levels/{joints}.glb).
 import * as THREE from 'three';
 import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
 import { ApiError, authHeaders } from './api.js';
@@ -48,19 +47,4 @@ export function measure(object) {
   const box = new THREE.Box3().setFromObject(object);
   const size = box.getSize(new THREE.Vector3());
   return { box, size, height: Math.max(size.x, size.y, size.z), centre: box.getCenter(new THREE.Vector3()) };
-}
-
-// The level SelectLevel picks for a character `px` pixels tall with the default 1 px
-// budget: level l serves (px_min, px_max] (px_max null: unbounded); levels that are never
-// chosen serve nothing. Below every range: the coarsest chosen level.
-export function levelForPixels(levels, px) {
-  let coarsest = levels[levels.length - 1];
-  for (const level of levels) {
-    if (!level.chosen) continue;
-    coarsest = level;
-    if (px > level.px_min && (level.px_max === null || level.px_max === undefined || px <= level.px_max)) {
-      return level;
-    }
-  }
-  return coarsest;
 }
