@@ -10,6 +10,7 @@
 #include "core/internal/level_solve.h"
 #include "core/internal/normal_equations.h"
 #include "core/internal/rigid_projection.h"
+#include "core/internal/skeleton_drift.h"
 
 namespace motionlod::core {
 
@@ -108,7 +109,7 @@ StatusOr<VariantSolution> SolveVariant(const PreparedData& d, const ReducedSkele
   auto system = SolveNormalEquations(d, level);
   if (!system.ok()) return system.status();
   if (IsRigid(d.settings.variant)) {
-    if (Status status = ProjectOnRotations(d, *system); !status.ok()) return status;
+    if (Status status = ProjectOnRotations(d, level, *system); !status.ok()) return status;
   }
   return VariantSolution{std::move(system->x), false};
 }
@@ -154,6 +155,7 @@ StatusOr<LevelResult> PreparedMotion::SolveOptimized(const ReducedSkeleton& leve
   }
   internal::EvaluateErrors(d, solution->Delta(d, level), level.kept_joints, internal::Figures::kAll,
                            result.optimized, std::numeric_limits<double>::infinity(), run);
+  internal::EvaluateSkeletonDrift(d, level, x, result.optimized);
   return result;
 }
 
