@@ -65,7 +65,8 @@ void EvaluateSkeletonDrift(const PreparedData& d, const ReducedSkeleton& level, 
   }
   out.bone_length_drift_pct = 100.0 * length_drift / d.character->height();
 
-  // The rotations of both, projected where they are not rotations already.
+  // The rotations of both: their polar factors (a rigid variant's and the originals are
+  // rotations to their float source's precision already, and converge at once).
   MatrixXd fitted = x, original(4 * m, cols);
   for (int s = 0; s < m; ++s) original.middleRows<4>(4 * s) = d.kt.middleRows<4>(4 * level.kept_joints[s]);
   std::vector<double*> fitted_blocks, original_blocks;
@@ -77,7 +78,7 @@ void EvaluateSkeletonDrift(const PreparedData& d, const ReducedSkeleton& level, 
       original_blocks.push_back(original.data() + 3 * t * original.rows() + 4 * s);
     }
   }
-  if (!IsRigid(d.settings.variant)) NearestRotations(fitted_blocks, fitted.rows(), d.simd);
+  NearestRotations(fitted_blocks, fitted.rows(), d.simd);
   NearestRotations(original_blocks, original.rows(), d.simd);
   // The angle between rotations R and R' from their chord: |R - R'|_F = 2 sqrt(2) sin(angle / 2),
   // exact at small angles where acos of the trace keeps half the digits.

@@ -6,7 +6,7 @@
 //   bone length drift: max over kept j with a kept parent q and frames t of
 //             | |p'_j - p'_q| - |p_j - p_q| |, percent of the character's height
 //   rotation drift: max over kept j and t of the angle between polar(K'_s(t)) and
-//             polar(K_j(t)) (3x3 parts; a rigid variant's are rotations already), degrees
+//             polar(K_j(t)) (3x3 parts), degrees
 // The naive reference, from the motion's world matrices, is
 // core/reference/skeleton_drift_reference.h.
 #pragma once

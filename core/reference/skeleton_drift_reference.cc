@@ -8,7 +8,7 @@
 namespace motionlod::core {
 
 SkeletonDriftFigures SkeletonDriftReference(const Character& character, const Motion& motion,
-                                            const LevelResult& level, Variant variant) {
+                                            const LevelResult& level) {
   const ReducedSkeleton& skeleton = level.skeleton;
   const int m = skeleton.kept_count();
   const auto fitted = [&](int t, int s) -> Affine34d {
@@ -21,9 +21,9 @@ SkeletonDriftFigures SkeletonDriftReference(const Character& character, const Mo
       const Affine34d& bind = character.skeleton().bind_world[j];
       const Affine34d original = ComposeAffine(motion.world(t, j), InverseAffine(bind));
       const Eigen::Matrix3d r = NearestRotationReference(original.leftCols<3>());
-      const Eigen::Matrix3d r_fitted =
-          IsRigid(variant) ? Eigen::Matrix3d(fitted(t, s).leftCols<3>())
-                           : NearestRotationReference(fitted(t, s).leftCols<3>());
+      // A rigid variant's stored rotations are rotations to float precision: their polar
+      // factor is themselves, orthonormal to the last bit.
+      const Eigen::Matrix3d r_fitted = NearestRotationReference(fitted(t, s).leftCols<3>());
       const double cosine = std::clamp(((r_fitted.transpose() * r).trace() - 1) / 2, -1.0, 1.0);
       figures.joint_rotation_drift_deg =
           std::max(figures.joint_rotation_drift_deg, std::acos(cosine) * 180.0 / M_PI);

@@ -16,9 +16,8 @@ struct SkeletonDriftFigures {
   double joint_rotation_drift_deg = 0;  // degrees
 };
 
-// The figures of `level` (its skeleton and T x m matrices), solved in `variant` for
-// `motion` of `character`.
+// The figures of `level` (its skeleton and T x m matrices) for `motion` of `character`.
 SkeletonDriftFigures SkeletonDriftReference(const Character& character, const Motion& motion,
-                                            const LevelResult& level, Variant variant);
+                                            const LevelResult& level);
 
 }  // namespace motionlod::core
