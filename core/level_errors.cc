@@ -133,6 +133,8 @@ LevelErrors WorstOverClips(std::vector<LevelErrors> per_clip, std::span<const Mo
     out.rms_vertex_error_pct = std::max(out.rms_vertex_error_pct, clip.rms_vertex_error_pct);
     out.mean_vertex_error_pct = std::max(out.mean_vertex_error_pct, clip.mean_vertex_error_pct);
     out.mean_normal_error_deg = std::max(out.mean_normal_error_deg, clip.mean_normal_error_deg);
+    out.bone_length_drift_pct = std::max(out.bone_length_drift_pct, clip.bone_length_drift_pct);
+    out.joint_rotation_drift_deg = std::max(out.joint_rotation_drift_deg, clip.joint_rotation_drift_deg);
   }
   out.per_clip = std::move(per_clip);
   return out;

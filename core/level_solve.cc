@@ -10,6 +10,7 @@
 #include "core/internal/level_solve.h"
 #include "core/internal/normal_equations.h"
 #include "core/internal/rigid_projection.h"
+#include "core/internal/skeleton_drift.h"
 
 namespace motionlod::core {
 
@@ -117,7 +118,7 @@ StatusOr<VariantSolution> SolveVariant(const PreparedData& d, const ReducedSkele
   auto system = SolveNormalEquations(d, level);
   if (!system.ok()) return system.status();
   if (IsRigid(d.settings.variant)) {
-    if (Status status = ProjectOnRotations(d, *system); !status.ok()) return status;
+    if (Status status = ProjectOnRotations(d, level, *system); !status.ok()) return status;
   }
   return VariantSolution{std::move(system->x), false};
 }
@@ -126,19 +127,28 @@ StatusOr<VariantSolution> SolveVariant(const PreparedData& d, const ReducedSkele
 
 namespace {
 
-// Every figure of candidate matrices S for a level keeping `kept`, clip by clip, each on
-// its clip's part of the prepared motion (core/internal/prepared_data.h), combined as the
-// worst clip's. S is `x` (4 rows per matrix, 3T columns over every frame) read at
-// solution_row[k] for joint k, or the original matrices where `x` is null.
-LevelErrors ClipFigures(const internal::PreparedData& d, const MatrixXd* x,
-                        const std::vector<int>& solution_row, const std::vector<int>& kept,
+// Every figure of candidate matrices S for `level` on one clip's part of the prepared
+// motion (core/internal/prepared_data.h). S is the level's own matrices `x` (4m x 3T,
+// block (4s, 3t) = K'_s(t)^T, read at solution_row[k] = 4 phi(k)), or the original
+// matrices where `x` is null (read at solution_row[k]; kept joints keep their own, so the
+// skeleton does not drift).
+LevelErrors PartFigures(const internal::PreparedData& part, const ReducedSkeleton& level,
+                        const MatrixXd* x, const std::vector<int>& solution_row,
                         const PieceRunner& run) {
-  const auto evaluate = [&](const internal::PreparedData& part, const MatrixXd* solution) {
-    LevelErrors errors;
-    internal::EvaluateErrors(part, internal::DeltaView{solution ? solution : &part.kt, solution_row, &part.kt},
-                             kept, internal::Figures::kAll, errors,
-                             std::numeric_limits<double>::infinity(), run);
-    return errors;
+  LevelErrors errors;
+  internal::EvaluateErrors(part, internal::DeltaView{x ? x : &part.kt, solution_row, &part.kt},
+                           level.kept_joints, internal::Figures::kAll, errors,
+                           std::numeric_limits<double>::infinity(), run);
+  if (x != nullptr) internal::EvaluateSkeletonDrift(part, level, *x, errors);
+  return errors;
+}
+
+// PartFigures clip by clip (`x` over every frame), combined as the worst clip's.
+LevelErrors ClipFigures(const internal::PreparedData& d, const ReducedSkeleton& level,
+                        const MatrixXd* x, const std::vector<int>& solution_row,
+                        const PieceRunner& run) {
+  const auto evaluate = [&](const internal::PreparedData& part, const MatrixXd* part_x) {
+    return PartFigures(part, level, part_x, solution_row, run);
   };
   std::vector<LevelErrors> per_clip;
   if (d.clip_parts.empty()) {
@@ -207,8 +217,8 @@ StatusOr<LevelResult> PreparedMotion::SolveOptimized(const ReducedSkeleton& leve
   result.matrices.resize(static_cast<size_t>(d.frames) * m);
   StoreMatrices(solution->Matrices(d), m, d.frames, result.matrices.data());
   const internal::DeltaView delta = solution->Delta(d, level);
-  result.optimized = ClipFigures(d, solution->unchanged ? nullptr : &solution->x, delta.solution_row,
-                                 level.kept_joints, run);
+  result.optimized = ClipFigures(d, level, solution->unchanged ? nullptr : &solution->x,
+                                 delta.solution_row, run);
   result.sources.assign(d.clips.size(), LevelSource::kSolved);
   return result;
 }
@@ -217,7 +227,7 @@ StatusOr<LevelErrors> PreparedMotion::BaselineErrors(const ReducedSkeleton& leve
                                                      const PieceRunner& run) const {
   const internal::PreparedData& d = *data_;
   if (Status status = internal::ValidateLevel(level, d.n); !status.ok()) return status;
-  return ClipFigures(d, nullptr, internal::BaselineDelta(d, level).solution_row, level.kept_joints, run);
+  return ClipFigures(d, level, nullptr, internal::BaselineDelta(d, level).solution_row, run);
 }
 
 void PreparedMotion::KeepNoWorseThanReparenting(LevelResult& result) const {
@@ -264,21 +274,21 @@ Status PreparedMotion::LiftCoarserLevel(const LevelResult& coarser, LevelResult&
     }
     const MotionClip& clip = d.clips[c];
     const internal::PreparedData& part = d.clip_parts.empty() ? d : d.clip_parts[c]->data();
-    // The coarser level's matrices of the clip as the rows of a solution (4m x 3T).
-    MatrixXd x(4 * m_from, 3 * clip.frame_count);
+    // Each kept joint of the finer level takes the coarser level's matrix of its nearest
+    // joint kept there, as the rows of a solution (4m x 3T of the clip).
+    MatrixXd x(4 * m_to, 3 * clip.frame_count);
     for (int t = 0; t < clip.frame_count; ++t) {
-      for (int s = 0; s < m_from; ++s) {
+      for (int s = 0; s < m_to; ++s) {
         x.block<4, 3>(4 * s, 3 * t) =
-            coarser.matrices[static_cast<size_t>(clip.first_frame + t) * m_from + s]
+            coarser.matrices[static_cast<size_t>(clip.first_frame + t) * m_from +
+                             from.joint_to_slot[to.kept_joints[s]]]
                 .cast<double>()
                 .transpose();
       }
     }
     std::vector<int> solution_row(d.n);
-    for (int k = 0; k < d.n; ++k) solution_row[k] = 4 * from.joint_to_slot[k];
-    LevelErrors figures;
-    internal::EvaluateErrors(part, internal::DeltaView{&x, solution_row, &part.kt}, to.kept_joints,
-                             internal::Figures::kAll, figures);
+    for (int k = 0; k < d.n; ++k) solution_row[k] = 4 * to.joint_to_slot[k];
+    LevelErrors figures = PartFigures(part, to, &x, solution_row, {});
     if (!NoWorseThan(figures, finer.baseline.per_clip[c]) ||
         figures.max_vertex_error_pct >= finer.optimized.per_clip[c].max_vertex_error_pct) {
       continue;

@@ -43,7 +43,9 @@
 // Where each step lives (a newcomer reads the reference first):
 //   prepare_motion.cc     Kt, the pairs' moments, alpha and beta, F          (Create)
 //   normal_equations.cc   G, B, the block Cholesky factor, X    reference/solve_frame_reference.h
-//   rigid_projection.cc   polar projection, translation re-solve  reference/polar_reference.h
+//   rigid_projection.cc   polar projection, translation re-solve under the bone lengths,
+//                         rotation re-fit                          reference/polar_reference.h
+//   skeleton_drift.cc     bone length and rotation drift     reference/skeleton_drift_reference.h
 //   level_errors.cc       E and its parts, RMS, sampled figures   reference/level_errors_reference.h
 //   max_vertex_error.cc   the exact maximum by bounded search     reference/level_errors_reference.h
 //   baseline_sequence.h   baselines of nested levels            BaselineErrors level by level
@@ -84,7 +86,9 @@ inline constexpr uint32_t kAlgorithmVersion = 7;
 struct SolveSettings {
   Variant variant = Variant::kVPNOPD;
   // Rigid variants: after the projection, re-solve each translation with its rotation
-  // fixed (the exact minimiser of E over them); false keeps the solved translation.
+  // fixed (the exact minimiser of E over them) under the bone lengths, and re-fit the
+  // rotations (core/internal/rigid_projection.h); false keeps the solved translation, and
+  // with it the bones' stretch.
   bool resolve_rigid_translation = true;
   double joint_weight = 0.1;     // omega, >= 0
   double regularization = 1e-7;  // relative Tikhonov weight, > 0
@@ -114,6 +118,13 @@ struct LevelErrors {
   // blended normals (degrees) over the sample of SolveSettings.
   double mean_vertex_error_pct = 0;
   double mean_normal_error_deg = 0;
+  // How far the kept joints stray from the original skeleton over every frame
+  // (core/internal/skeleton_drift.h): the largest change of a kept joint's distance to its
+  // kept parent, percent of the height, and the largest angle between a kept joint's
+  // rotation (polar factor) and its original's, degrees. Zero for the baseline, whose
+  // kept joints keep their original matrices.
+  double bone_length_drift_pct = 0;
+  double joint_rotation_drift_deg = 0;
   // Each clip's figures (Motion::clips, in order) on its own frames: frame and vertex
   // indices within the clip, per_clip empty. The figures above are the worst clip's (each
   // on its own: mean_e the largest clip mean, max_e_frame and max_vertex_frame frames of

@@ -32,7 +32,9 @@ json ErrorsJson(const core::LevelErrors& e) {
           {"max_vertex_index", e.max_vertex_index},
           {"rms_vertex_error_pct", e.rms_vertex_error_pct},
           {"mean_vertex_error_pct", e.mean_vertex_error_pct},
-          {"mean_normal_error_deg", e.mean_normal_error_deg}};
+          {"mean_normal_error_deg", e.mean_normal_error_deg},
+          {"bone_length_drift_pct", e.bone_length_drift_pct},
+          {"joint_rotation_drift_deg", e.joint_rotation_drift_deg}};
 }
 
 }  // namespace
@@ -158,6 +160,8 @@ json BuildReport(const ReportInputs& in) {
                   {"baseline_mean_vertex_error_pct", r.baseline.mean_vertex_error_pct},
                   {"mean_normal_error_deg", r.optimized.mean_normal_error_deg},
                   {"baseline_mean_normal_error_deg", r.baseline.mean_normal_error_deg},
+                  {"bone_length_drift_pct", r.optimized.bone_length_drift_pct},
+                  {"joint_rotation_drift_deg", r.optimized.joint_rotation_drift_deg},
                   {"max_px_for_1px_error", FiniteOrNull(max_px)},
                   {"optimized", ErrorsJson(r.optimized)},
                   {"baseline", ErrorsJson(r.baseline)}};

@@ -1,12 +1,18 @@
 // The rigid variants' step (eq. 8): each least-squares K'_s(t) is projected on its
-// nearest rotation (polar decomposition, core/polar.h), then, by default, each translation
-// is re-solved with every rotation fixed, the exact minimiser of E over the translations.
+// nearest rotation (polar decomposition, core/polar.h), then, by default, the level keeps
+// its skeleton: rounds of (a) the translations re-solved with every rotation fixed (the
+// exact minimiser of E over them) and the kept joints' positions moved, in E's metric,
+// until each bone |p'_j - p'_q| (q its kept parent) is within 1.9% of the character's
+// height of the original |p_j(t) - p_q(t)|, and (b) the rotations re-fitted with those
+// positions fixed by majorise-minimise steps that never raise E. The drift figures are
+// core/internal/skeleton_drift.h.
 #pragma once
 
 #include <Eigen/Core>
 
 #include "core/internal/normal_equations.h"
 #include "core/internal/prepared_data.h"
+#include "core/reduce_skeleton.h"
 
 namespace motionlod::core::internal {
 
@@ -16,8 +22,9 @@ namespace motionlod::core::internal {
 // Collada files are orthonormal to 3e-6 to 8e-6 (2e-16 for BVH).
 bool AllRotations(const Eigen::MatrixXd& x, SimdChoice simd);
 
-// Projects system.x on rotations and, with SolveSettings::resolve_rigid_translation,
-// re-solves its translations from G and system.translation_bt.
-Status ProjectOnRotations(const PreparedData& d, LevelSystem& system);
+// Projects system.x (the least-squares solution of `level`) on rotations and, with
+// SolveSettings::resolve_rigid_translation, fits its translations and rotations under the
+// bone lengths from G and system.translation_bt (which it consumes).
+Status ProjectOnRotations(const PreparedData& d, const ReducedSkeleton& level, LevelSystem& system);
 
 }  // namespace motionlod::core::internal

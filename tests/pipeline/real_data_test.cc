@@ -17,6 +17,7 @@
 #include "core/internal/level_solve.h"
 #include "core/internal/prepared_data.h"
 #include "core/reference/level_errors_reference.h"
+#include "core/reference/skeleton_drift_reference.h"
 #include "core/reference/solve_frame_reference.h"
 #include "core/solve_levels.h"
 #include "io/asset.h"
@@ -230,6 +231,72 @@ TEST_F(RealData, RigidVariantsStoreRotationsAndReSolvedTranslationHelps) {
     }
     const auto r_keep = kept_t->SolveLevel(Level(s, kept));
     EXPECT_LE(r->optimized.mean_e, r_keep->optimized.mean_e * (1 + 1e-9)) << kept;
+  }
+}
+
+// Rigid levels keep their skeleton: at every level, each kept joint's distance to its kept
+// parent stays within 2% of the character's height of the original's at that frame, and
+// the vertex error stays near that of the rigid levels before they kept it (algorithm
+// version 6, which stretched bones by up to 16.6% of the height): the sum over levels of the
+// mean vertex error within 5% of its sum then, the largest maximum within 1% of the height
+// of the largest then (figures of `motionlod bake --all-levels`, % of height).
+TEST_F(RealData, RigidLevelsKeepTheirBoneLengthsAtEveryLevel) {
+  struct Before {
+    const char* file;
+    core::Variant variant;
+    double mean_sum_pct, max_pct;
+  };
+  const Before before[] = {
+      {"characters/CesiumMan.glb", core::Variant::kVPPD, 30.569, 40.330},
+      {"characters/CesiumMan.glb", core::Variant::kVPNOPD, 28.103, 45.268},
+      {"characters/Fox.glb", core::Variant::kVPPD, 9.000, 16.512},
+      {"characters/Fox.glb", core::Variant::kVPNOPD, 8.973, 16.830},
+      {"characters/RobotExpressive.glb", core::Variant::kVPPD, 31.345, 73.824},
+      {"characters/RobotExpressive.glb", core::Variant::kVPNOPD, 31.656, 73.813},
+      {"characters/Orc.gltf", core::Variant::kVPPD, 33.881, 62.678},
+      {"characters/Orc.gltf", core::Variant::kVPNOPD, 35.228, 52.147},
+  };
+  for (const Before& b : before) {
+    const RealScene s = Load(b.file);
+    const auto prepared = Prepare(s, b.variant);
+    const std::string where = std::string(b.file) + " " + core::VariantName(b.variant);
+    double mean_sum = 0, max_max = 0;
+    for (int kept = 1; kept <= s.inputs.character->joint_count(); ++kept) {
+      const auto r = prepared->SolveOptimized(Level(s, kept));
+      ASSERT_TRUE(r.ok()) << where;
+      EXPECT_LE(r->optimized.bone_length_drift_pct, 2.0) << where << " kept " << kept;
+      mean_sum += r->optimized.mean_vertex_error_pct;
+      max_max = std::max(max_max, r->optimized.max_vertex_error_pct);
+    }
+    EXPECT_LE(mean_sum, 1.05 * b.mean_sum_pct) << where;
+    EXPECT_LE(max_max, b.max_pct + 1.0) << where;
+  }
+}
+
+// The drift figures are those of the naive reference (the motion's world matrices, SVDs),
+// to the float precision of the stored matrices, in every variant.
+TEST_F(RealData, SkeletonDriftFiguresEqualTheNaiveReference) {
+  for (const char* file : {"characters/CesiumMan.glb", "characters/Fox.glb"}) {
+    const RealScene s = Load(file, 0, 40);
+    const int n = s.inputs.character->joint_count();
+    for (core::Variant variant : {core::Variant::kVP, core::Variant::kVPNO, core::Variant::kVPPD,
+                                  core::Variant::kVPNOPD}) {
+      const auto prepared = Prepare(s, variant);
+      for (int kept : {n, n / 2, 4, 1}) {
+        const auto r = prepared->SolveOptimized(Level(s, kept));
+        ASSERT_TRUE(r.ok());
+        const core::SkeletonDriftFigures reference =
+            core::SkeletonDriftReference(*s.inputs.character, s.inputs.motion, *r);
+        const std::string where =
+            std::string(file) + " " + core::VariantName(variant) + " kept " + std::to_string(kept);
+        EXPECT_NEAR(r->optimized.bone_length_drift_pct, reference.bone_length_drift_pct, 1e-3)
+            << where;
+        // acos of the trace resolves small angles to about 1e-6 degrees; the stored matrices
+        // are floats.
+        EXPECT_NEAR(r->optimized.joint_rotation_drift_deg, reference.joint_rotation_drift_deg, 1e-3)
+            << where;
+      }
+    }
   }
 }
 
