@@ -159,6 +159,19 @@ Status LiftCoarserLevels(const core::PreparedMotion& prepared, std::map<int, cor
   return Status::Ok();
 }
 
+std::pair<int, int> SmallestLevelBracket(const std::map<int, double>& max_error_pct, int minimum,
+                                         int joint_count, double bound_pct) {
+  int lo = minimum, hi = joint_count;
+  for (const auto& [count, error] : max_error_pct) {
+    if (error <= bound_pct) {
+      hi = std::min(hi, count);
+    } else {
+      lo = std::max(lo, count + 1);
+    }
+  }
+  return {std::min(lo, hi), hi};
+}
+
 std::vector<int> DefaultLadder(int joint_count, int minimum) {
   const int n = joint_count;
   std::vector<int> ladder = {n, static_cast<int>(std::lround(0.75 * n)),
@@ -362,17 +375,11 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
     // is within the bound. The ladder's exact errors bracket it; the search narrows the
     // bracket (core/smallest_level.h), and the level it finds is solved on every frame.
     const double bound = request.smallest_useful_error_pct;
-    int lo = minimum, hi = n;
-    for (const auto& [count, result] : solved) {
-      if (result.optimized.max_vertex_error_pct <= bound) {
-        hi = std::min(hi, count);
-      } else {
-        lo = std::max(lo, count + 1);
-      }
-    }
-    lo = std::min(lo, hi);
+    std::map<int, double> max_error_pct;
+    for (const auto& [count, result] : solved) max_error_pct[count] = result.optimized.max_vertex_error_pct;
+    const auto [lo, hi] = SmallestLevelBracket(max_error_pct, minimum, n, bound);
     if (Cancelled(cancel)) return CancelledStatus();
-    auto found = core::SmallestLevelJob{prepared->get(), &*ranking, lo, hi, bound}.Run();
+    auto found = core::SmallestLevelJob{prepared->get(), ranking, lo, hi, bound}.Run();
     if (!found.ok()) return found.status();
     if (!solved.count(*found)) {
       if (Status status = solve({*found}, {}); !status.ok()) return status;

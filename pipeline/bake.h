@@ -10,6 +10,7 @@
 #include <map>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -112,6 +113,15 @@ struct SolveLevelsJob {
 // Coarsest first, each level of nested `levels` (keyed by count) made no worse than the
 // next coarser one (PreparedMotion::LiftCoarserLevel): adding joints never raises the error.
 Status LiftCoarserLevels(const core::PreparedMotion& prepared, std::map<int, core::LevelResult>& levels);
+
+// The counts the smallest useful level is searched between, from solved levels' maximum
+// vertex errors (count -> percent of the height): at most the fewest joints found within
+// the bound (n without one), at least one more than the most found over it (the fewest a
+// level may keep without one). A larger level over the bound than a smaller one within
+// it (errors need not fall as joints are added) leaves nothing to search: both ends are
+// the smaller one.
+std::pair<int, int> SmallestLevelBracket(const std::map<int, double>& max_error_pct, int minimum,
+                                         int joint_count, double bound_pct);
 
 // The default ladder for n joints and the minimum the locks allow: n, ~3n/4, ~n/2, ~n/4,
 // clamped to [minimum, n], duplicates removed, finest first (the smallest useful level is

@@ -77,6 +77,18 @@ core::ReducedSkeleton Level(const RealScene& s, int kept) {
   return *core::ReduceSkeletonToCount(*s.inputs.character, s.ranking, kept);
 }
 
+// The variant's own solution with its baseline's figures, before SolveLevel's guard
+// against reparenting: what the solver's figures are checked on.
+StatusOr<core::LevelResult> SolveUnguarded(const core::PreparedMotion& prepared,
+                                           const core::ReducedSkeleton& level) {
+  auto result = prepared.SolveOptimized(level);
+  if (!result.ok()) return result;
+  auto baseline = prepared.BaselineErrors(level);
+  if (!baseline.ok()) return baseline.status();
+  result->baseline = *std::move(baseline);
+  return result;
+}
+
 class RealData : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -320,7 +332,7 @@ TEST_F(RealData, VertexFiguresMatchBruteForce) {
         return kt.block<4, 3>(4 * joint, 3 * t).transpose();
       };
       for (int kept : {n - 1, n / 2, n / 4, 2}) {
-        const auto result = prepared->SolveLevel(Level(s, kept));
+        const auto result = SolveUnguarded(*prepared, Level(s, kept));
         ASSERT_TRUE(result.ok());
         const core::ReducedSkeleton& level = result->skeleton;
         const auto reduced = core::ReduceInfluences(skin, level);
@@ -388,7 +400,7 @@ TEST_F(RealData, LevelFiguresAreThoseOfTheSkinnedMesh) {
         const auto prepared = *core::PreparedMotion::Create(s.inputs.character, s.inputs.motion, settings);
         for (int kept : {n - 1, n / 2, std::max(s.ranking.locked_count, 3)}) {
           const core::ReducedSkeleton level = Level(s, kept);
-          const auto result = prepared->SolveLevel(level);
+          const auto result = SolveUnguarded(*prepared, level);
           ASSERT_TRUE(result.ok());
           const auto solution = core::internal::SolveVariant(prepared->data(), level);
           const core::LevelErrors optimized =
@@ -487,6 +499,7 @@ TEST_F(RealData, EveryLevelBakeReportsEachLevelsBaseline) {
   BakeRequest request;
   request.character = *io::LoadAssetFile(DataPath(file));
   request.all_levels = true;
+  request.ranking_method = core::RankingMethod::kPaper;  // the levels of s.ranking
   request.threads = 2;
   request.measure_skinning_pass = false;
   const auto baked = Bake(request);
@@ -512,7 +525,7 @@ TEST_F(RealData, MaxVertexErrorWithinDecidesLikeTheExactMaximum) {
       const auto prepared = Prepare(s, variant);
       for (int kept : {n / 2, n / 3, n / 4, 2}) {
         const core::ReducedSkeleton level = Level(s, kept);
-        const auto exact = prepared->SolveLevel(level);
+        const auto exact = SolveUnguarded(*prepared, level);
         ASSERT_TRUE(exact.ok());
         const double maximum = exact->optimized.max_vertex_error_pct;
         const std::string where = std::string(file) + " " + core::VariantName(variant) + " kept " +
@@ -548,8 +561,8 @@ TEST_F(RealData, EveryNthFrameSolvesTheFullMotionsProblemOnItsFrames) {
       EXPECT_EQ(every_third.beta(), full->beta());
       for (int kept : {n, n / 2, 2}) {
         const core::ReducedSkeleton level = Level(s, kept);
-        const auto a = full->SolveLevel(level);
-        const auto b = every_third.SolveLevel(level);
+        const auto a = SolveUnguarded(*full, level);
+        const auto b = SolveUnguarded(every_third, level);
         ASSERT_TRUE(a.ok() && b.ok()) << file;
         const std::string where = std::string(file) + " " + core::VariantName(variant) +
                                   " kept " + std::to_string(kept);
@@ -674,40 +687,17 @@ TEST_F(RealData, TheDefaultLadderDoesNotDependOnTheThreads) {
   }
 }
 
-// The search below the ladder's smallest level starts before the larger levels are solved
-// (beside them) and counts only if none of them is over the bound. 08_02_cmu's vpno+pd
-// ladder is not monotone: with a 26% bound its 16-joint level is over and its 8-joint
-// level within, and 7 joints are within too, so a search below 8 would add a level. The
-// bracket is then empty: the smallest useful level is the ladder's 8, on any thread count.
-TEST_F(RealData, ALargerLevelOverTheBoundKeepsTheSearchAboveTheSmallestLevel) {
-  auto asset = io::LoadAssetFile(DataPath("motions/08_02_cmu.fbx"));
-  ASSERT_TRUE(asset.ok());
-  BakeRequest request = DefaultLadderRequest(*asset, core::Variant::kVPNOPD);
-  request.smallest_useful_error_pct = 26.0;
-  auto inputs = PrepareInputs(request);
-  ASSERT_TRUE(inputs.ok());
-  const int n = inputs->character->joint_count();
-  ASSERT_EQ(DefaultLadder(n, 1), (std::vector<int>{31, 23, 16, 8}));
-  const auto ranking = *core::RankJointsJob{inputs->character.get(), &inputs->motion, {}}.Run();
-  const auto prepared =
-      *core::PreparedMotion::Create(inputs->character, inputs->motion, request.settings);
-  const auto seven =
-      prepared->SolveLevel(*core::ReduceSkeletonToCount(*inputs->character, ranking, 7));
-  ASSERT_TRUE(seven.ok());
-  EXPECT_LE(seven->optimized.max_vertex_error_pct, request.smallest_useful_error_pct);
-
-  for (int threads : {1, 2}) {
-    request.threads = threads;
-    auto output = Bake(request);
-    ASSERT_TRUE(output.ok()) << output.status().ToString();
-    std::map<int, double> max_error_pct;
-    for (const nlohmann::json& level : output->report["levels"]) {
-      max_error_pct[level["joints"].get<int>()] = level["max_vertex_error_pct"].get<double>();
-    }
-    ASSERT_EQ(max_error_pct.size(), 4u) << threads << " threads: the search added a level";
-    EXPECT_GT(max_error_pct.at(16), request.smallest_useful_error_pct);
-    EXPECT_LE(max_error_pct.at(8), request.smallest_useful_error_pct);
-  }
+// The search for the smallest useful level is bracketed by the solved ladder's errors:
+// between one more than the largest count over the bound and the fewest within it. Where a
+// larger level is over the bound and a smaller one within (errors need not fall as joints
+// are added), nothing is searched: the smaller level is the answer.
+TEST(SmallestLevelBracket, FollowsTheLadderAndStopsWhereItIsNotMonotone) {
+  EXPECT_EQ(SmallestLevelBracket({{31, 1.0}, {23, 5.0}, {16, 12.0}, {8, 40.0}}, 1, 31, 26.0),
+            std::make_pair(9, 16));
+  EXPECT_EQ(SmallestLevelBracket({{31, 1.0}, {23, 5.0}, {16, 30.0}, {8, 20.0}}, 1, 31, 26.0),
+            std::make_pair(8, 8));
+  EXPECT_EQ(SmallestLevelBracket({{31, 1.0}, {8, 2.0}}, 3, 31, 26.0), std::make_pair(3, 8));
+  EXPECT_EQ(SmallestLevelBracket({{31, 30.0}}, 1, 31, 26.0), std::make_pair(31, 31));
 }
 
 TEST_F(RealData, BakeWritesALevelSetThatDecodesToTheSolvedMatrices) {
@@ -717,6 +707,7 @@ TEST_F(RealData, BakeWritesALevelSetThatDecodesToTheSolvedMatrices) {
   request.character = *asset;
   request.animation = "Walk";
   request.levels = {24, 12, 5};
+  request.ranking_method = core::RankingMethod::kPaper;
   request.threads = 2;
   auto output = Bake(request);
   ASSERT_TRUE(output.ok()) << output.status().ToString();
@@ -731,13 +722,18 @@ TEST_F(RealData, BakeWritesALevelSetThatDecodesToTheSolvedMatrices) {
   EXPECT_EQ(report["levels"].size(), 3u);
   EXPECT_EQ(report["motion"]["frames"].get<uint32_t>(), view->frame_count());
 
-  // The same level solved in-process gives the same matrices.
+  // The same levels solved in-process, each no worse than the coarser, give the same
+  // matrices.
   auto inputs = PrepareInputs(request);
   ASSERT_TRUE(inputs.ok());
   const auto ranking = *core::RankJointsJob{inputs->character.get(), &inputs->motion, {}}.Run();
   const auto prepared = *core::PreparedMotion::Create(inputs->character, inputs->motion, request.settings);
-  const auto level = prepared->SolveLevel(*core::ReduceSkeletonToCount(*inputs->character, ranking, 12));
-  ASSERT_TRUE(level.ok());
+  std::map<int, core::LevelResult> solved;
+  for (int kept : request.levels) {
+    solved[kept] = *prepared->SolveLevel(*core::ReduceSkeletonToCount(*inputs->character, ranking, kept));
+  }
+  ASSERT_TRUE(LiftCoarserLevels(*prepared, solved).ok());
+  const core::LevelResult* level = &solved.at(12);
   const proto::LevelView& stored = view->level(1);
   ASSERT_EQ(stored.kept_count(), 12u);
   for (uint32_t t = 0; t < stored.frame_count(); ++t) {
