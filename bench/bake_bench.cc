@@ -135,7 +135,7 @@ pipeline::BakeRequest RequestOf(const Case& c, core::Variant variant, int thread
   request.simd = Simd();
   request.character = c.character;
   request.motion = c.motion;
-  request.animation = c.animation;
+  request.animations = {c.animation};
   request.settings.variant = variant;
   request.threads = threads;
   request.character_label = c.file;

@@ -1,10 +1,9 @@
 #include "core/greedy_ranking.h"
 
 #include <algorithm>
-#include <atomic>
+#include <cmath>
 #include <limits>
 #include <memory>
-#include <mutex>
 #include <numeric>
 #include <vector>
 
@@ -26,12 +25,15 @@ struct Score {
   bool decided_above = false;
 };
 
-// Whether candidate a (score sa) is removed before b.
+// Whether candidate a (score sa) is tried before b: the order of the last scores.
 bool Before(const Score& sa, int a, const Score& sb, int b) {
   if (sa.max_pct != sb.max_pct) return sa.max_pct < sb.max_pct;
   if (sa.mean_e != sb.mean_e) return sa.mean_e < sb.mean_e;
   return a > b;
 }
+
+// The largest value that ties with `value` (GreedyPick).
+double TieLimit(double value) { return value + kGreedyTieTolerance * std::abs(value); }
 
 // A level solved on the probe: decided against `bound_pct` first
 // where it is finite, exactly where it is within it.
@@ -55,6 +57,22 @@ StatusOr<Score> ScoreLevel(const internal::PreparedData& probe, const ReducedSke
 }
 
 }  // namespace
+
+int GreedyPick(std::span<const int> joints, std::span<const double> max_pct,
+               std::span<const double> mean_e) {
+  const double lowest_max = *std::min_element(max_pct.begin(), max_pct.end());
+  double lowest_mean = kInfinity;
+  for (size_t i = 0; i < joints.size(); ++i) {
+    if (max_pct[i] <= TieLimit(lowest_max)) lowest_mean = std::min(lowest_mean, mean_e[i]);
+  }
+  int pick = -1;
+  for (size_t i = 0; i < joints.size(); ++i) {
+    if (max_pct[i] <= TieLimit(lowest_max) && mean_e[i] <= TieLimit(lowest_mean)) {
+      pick = std::max(pick, joints[i]);
+    }
+  }
+  return pick;
+}
 
 std::vector<int> ProbeFrames(std::span<const MotionClip> clips, int per_clip) {
   std::vector<int> frames;
@@ -110,38 +128,32 @@ StatusOr<JointRanking> GreedyRankingJob::Run(const PieceRunner& run) const {
     }
     std::sort(candidates.begin(), candidates.end(),
               [&](int a, int b) { return Before(last[a], a, last[b], b); });
-    std::mutex mutex;
-    Score best;  // guarded by mutex
-    int best_joint = -1;
-    Status error;
-    std::atomic<size_t> next{0};
-    // Each piece takes the next candidate in order: with pieces run in order (one thread),
-    // the first candidates set the bound the others are decided against.
-    RunPieces(run, static_cast<int>(candidates.size()), [&](int) {
-      const int j = candidates[next++];
+    // The candidate that scored best last time is scored exactly first; its maximum is
+    // the bound every other candidate of the step is decided against, each in a piece of
+    // its own writing only its own score.
+    const auto score = [&](int j, double bound) -> StatusOr<Score> {
       const auto flags = std::make_unique<bool[]>(n);
       for (int k = 0; k < n; ++k) flags[k] = keep[k] && k != j;
       auto level = ReduceSkeleton(c, std::span<const bool>(flags.get(), n));
-      double bound;
-      {
-        std::lock_guard lock(mutex);
-        bound = best.max_pct;
-      }
-      StatusOr<Score> score = level.ok() ? ScoreLevel(d, *level, bound) : StatusOr<Score>(level.status());
-      std::lock_guard lock(mutex);
-      if (!score.ok()) {
-        error = score.status();
-        return;
-      }
-      last[j] = *score;
-      if (!score->decided_above && (best_joint < 0 || Before(*score, j, best, best_joint))) {
-        best = *score;
-        best_joint = j;
-      }
-    });
-    if (!error.ok()) return error;
+      if (!level.ok()) return level.status();
+      return ScoreLevel(d, *level, bound);
+    };
+    std::vector<StatusOr<Score>> scores(candidates.size(), Score{});
+    scores[0] = score(candidates[0], kInfinity);
+    if (!scores[0].ok()) return scores[0].status();
+    const double bound = TieLimit(scores[0]->max_pct);
+    RunPieces(run, static_cast<int>(candidates.size()) - 1,
+              [&](int piece) { scores[piece + 1] = score(candidates[piece + 1], bound); });
+    std::vector<double> max_pct, mean_e;
+    for (size_t i = 0; i < candidates.size(); ++i) {
+      if (!scores[i].ok()) return scores[i].status();
+      last[candidates[i]] = *scores[i];
+      max_pct.push_back(scores[i]->max_pct);
+      mean_e.push_back(scores[i]->mean_e);
+    }
+    const int best_joint = GreedyPick(candidates, max_pct, mean_e);
     keep[best_joint] = 0;
-    ranking.priority[best_joint] = best.max_pct;
+    ranking.priority[best_joint] = last[best_joint].max_pct;
     ranking.removal_order.push_back(best_joint);
   }
   // The locked joints last, the root at the very end.

@@ -5,14 +5,15 @@
 // chain's links one after another and protects trunk joints whose removal costs little.
 //
 // Each step scores every candidate (a kept joint, never the root or a locked one) by
-// solving the level without it (the variant's own solution, step 4) on the probe frames
-// and taking its maximum vertex error; the lowest wins, ties by the lower mean E, then the
-// higher joint index. Exact, with three savings that change no choice:
-//   - the probe: up to probe_frames_per_clip evenly spaced frames of each clip (0: all);
-//   - candidates are tried in the order of their last score, so the best is found early;
-//   - a candidate's maximum is only decided against the best so far (the search stops at
-//     the first vertex past it, core/internal/max_vertex_error.h), and found exactly
-//     only when it is within it.
+// solving the level without it (the variant's own solution, step 4) on the probe frames,
+// up to probe_frames_per_clip evenly spaced frames of each clip (0: all), and taking its
+// maximum vertex error; the lowest wins, ties by the lower mean E, then the higher joint
+// index (GreedyPick: values within kGreedyTieTolerance of each other tie, so that the
+// order does not follow rounding, in which the machine versions of core/simd.h differ,
+// between symmetric joints). Two savings change no choice: the candidate that scored best at the last step is
+// scored first, and every other candidate's maximum is only decided against its (the
+// search stops at the first vertex past it, core/internal/max_vertex_error.h), found
+// exactly only where it is within it.
 // The naive reference, every candidate scored by PreparedMotion::SolveOptimized, is
 // core/reference/greedy_ranking_reference.h.
 #pragma once
@@ -42,6 +43,15 @@ struct GreedyRankingJob {
   // for any runner.
   StatusOr<JointRanking> Run(const PieceRunner& run = {}) const;
 };
+
+inline constexpr double kGreedyTieTolerance = 1e-9;  // relative
+
+// The candidate a greedy step removes, given each candidate's joint, maximum vertex error
+// and mean E (infinite where only decided above another's maximum): the lowest maximum,
+// among those within the tolerance of it the lowest mean E, among those within the
+// tolerance of that the highest joint index. The same for any order of the candidates.
+int GreedyPick(std::span<const int> joints, std::span<const double> max_pct,
+               std::span<const double> mean_e);
 
 // The probe frames of GreedyRankingJob: up to `per_clip` evenly spaced frames of each clip
 // (its first among them), every frame where per_clip is 0 or the clip is no longer.

@@ -185,6 +185,9 @@ std::vector<int> DefaultLadder(int joint_count, int minimum) {
 
 namespace {
 
+// A bake's clips together: as many joint matrices as one clip may hold (io::Asset).
+constexpr size_t kMaxClipMatrices = 10'000'000;
+
 // PrepareInputs for a validated request, on `pool`, without the motion's check: Bake's
 // core entry points (the ranking, PreparedMotion::Create) each make it first.
 StatusOr<BakeInputs> PrepareInputsOn(const BakeRequest& request, TaskPool& pool) {
@@ -192,34 +195,64 @@ StatusOr<BakeInputs> PrepareInputsOn(const BakeRequest& request, TaskPool& pool)
   const io::Asset& character_asset = *request.character;
   inputs.warnings = character_asset.warnings();
   // The character and the motion are built side by side: the motion needs only the asset.
+  const io::Asset& motion_source = request.motion ? *request.motion : character_asset;
+  std::vector<std::string> names = request.animations;
+  if (names.empty()) {
+    for (const io::AnimationInfo& animation : motion_source.animations()) names.push_back(animation.name);
+    if (names.empty()) names.push_back("");  // sampling says the source has no animation
+  }
   std::optional<StatusOr<std::shared_ptr<const core::Character>>> character;
   Status motion_status;
   std::vector<std::string> motion_warnings;
+  std::vector<core::Motion> clips(names.size());
   pool.Run(2, [&](int task) {
     if (task == 0) {
       character = core::BuildCharacter(character_asset.character(), pool.Runner());
-    } else if (request.motion) {
-      auto retargeted = io::RetargetAnimation(*request.motion, request.animation, request.fps,
-                                              character_asset.character(), pool.Runner());
-      if (!retargeted.ok()) {
-        motion_status = retargeted.status();
-        return;
-      }
-      inputs.motion = std::move(retargeted->motion);
-      for (const std::string& name : retargeted->unmatched_target_joints) {
-        motion_warnings.push_back("joint '" + name + "' has no match in the motion: it keeps its bind pose");
-      }
-      for (const std::string& name : retargeted->unmatched_source_joints) {
-        motion_warnings.push_back("the motion's joint '" + name + "' matches no joint of the character");
-      }
-    } else {
-      auto motion = character_asset.SampleAnimation(request.animation, request.fps, pool.Runner());
-      if (!motion.ok()) {
-        motion_status = motion.status();
-        return;
-      }
-      inputs.motion = std::move(*motion);
+      return;
     }
+    for (size_t c = 0; c < names.size() && motion_status.ok(); ++c) {
+      if (request.motion) {
+        auto retargeted = io::RetargetAnimation(*request.motion, names[c], request.fps,
+                                                character_asset.character(), pool.Runner());
+        if (!retargeted.ok()) {
+          motion_status = retargeted.status();
+          return;
+        }
+        clips[c] = std::move(retargeted->motion);
+        if (c > 0) continue;  // every clip of one file matches the same joints
+        for (const std::string& name : retargeted->unmatched_target_joints) {
+          motion_warnings.push_back("joint '" + name + "' has no match in the motion: it keeps its bind pose");
+        }
+        for (const std::string& name : retargeted->unmatched_source_joints) {
+          motion_warnings.push_back("the motion's joint '" + name + "' matches no joint of the character");
+        }
+      } else {
+        auto motion = character_asset.SampleAnimation(names[c], request.fps, pool.Runner());
+        if (!motion.ok()) {
+          motion_status = motion.status();
+          return;
+        }
+        clips[c] = *std::move(motion);
+      }
+    }
+    if (clips.size() == 1) {
+      inputs.motion = std::move(clips.front());
+      return;
+    }
+    size_t matrices = 0;
+    for (const core::Motion& clip : clips) matrices += clip.joint_world.size();
+    if (matrices > kMaxClipMatrices) {
+      motion_status = InvalidArgument("the clips hold " + std::to_string(matrices) +
+                                      " joint matrices together, more than " +
+                                      std::to_string(kMaxClipMatrices) + ": bake fewer clips at once");
+      return;
+    }
+    auto joined = core::ConcatenateClips(clips);
+    if (!joined.ok()) {
+      motion_status = joined.status();
+      return;
+    }
+    inputs.motion = *std::move(joined);
   });
   if (!character->ok()) return character->status();
   inputs.character = **character;

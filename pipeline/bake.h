@@ -31,7 +31,10 @@ struct BakeRequest {
   // A separate motion file retargeted onto the character by joint name; null to use
   // the character's own animation.
   std::shared_ptr<const io::Asset> motion;
-  std::string animation;  // "" = the first animation of the motion source
+  // The clips baked together, by name, in this order: one reduced skeleton per level for
+  // all of them, matrices and figures per clip. Empty = every animation of the motion
+  // source ("" in the list: its first).
+  std::vector<std::string> animations;
   double fps = 0;         // 0 = the source's rate
   // Kept joint counts, any order; empty = the default ladder (full, ~3/4, ~1/2, ~1/4 and
   // the smallest useful skeleton). all_levels: every count from n down to the minimum.
@@ -79,6 +82,7 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
                           const std::atomic<bool>* cancel = nullptr);
 
 // The character and motion a request bakes, built and validated; used by Bake and `rank`.
+// The motion holds every clip, one after another (core::Motion::clips names them).
 struct BakeInputs {
   std::shared_ptr<const core::Character> character;
   core::Motion motion;

@@ -116,11 +116,25 @@ json BuildReport(const ReportInputs& in) {
                          {"triangles", in.character.skin().triangles.size()},
                          {"height", in.character.height()},
                          {"proxy_skin", in.request.character->has_proxy_skin()}};
-  report["motion"] = {{"name", in.motion.name},
+  const std::vector<core::MotionClip> clips = in.motion.Clips();
+  std::string names;
+  double seconds = 0;
+  json clip_table = json::array();
+  for (const core::MotionClip& clip : clips) {
+    names += (names.empty() ? "" : ", ") + clip.name;
+    seconds += (clip.frame_count - 1) / clip.fps;
+    clip_table.push_back({{"name", clip.name},
+                          {"first_frame", clip.first_frame},
+                          {"frames", clip.frame_count},
+                          {"fps", clip.fps},
+                          {"seconds", (clip.frame_count - 1) / clip.fps}});
+  }
+  report["motion"] = {{"name", names},
                       {"source", in.request.motion ? in.request.motion_label : in.request.character_label},
                       {"frames", in.motion.frame_count},
-                      {"fps", in.motion.fps},
-                      {"seconds", (in.motion.frame_count - 1) / in.motion.fps}};
+                      {"fps", clips.front().fps},
+                      {"seconds", seconds}};
+  report["clips"] = std::move(clip_table);
   report["variant"] = core::VariantName(settings.variant);
   report["settings"] = {{"resolve_rigid_translation", settings.resolve_rigid_translation},
                         {"joint_weight", settings.joint_weight},
@@ -165,6 +179,26 @@ json BuildReport(const ReportInputs& in) {
                   {"max_px_for_1px_error", FiniteOrNull(max_px)},
                   {"optimized", ErrorsJson(r.optimized)},
                   {"baseline", ErrorsJson(r.baseline)}};
+    json per_clip = json::array();
+    for (size_t c = 0; c < clips.size(); ++c) {
+      const core::LevelErrors& clip = r.optimized.per_clip[c];
+      const core::LevelErrors& base = r.baseline.per_clip[c];
+      per_clip.push_back(
+          {{"clip", clips[c].name},
+           {"source", core::LevelSourceName(r.sources[c])},
+           {"mean_E", clip.mean_e},
+           {"max_vertex_error_pct", clip.max_vertex_error_pct},
+           {"mean_vertex_error_pct", clip.mean_vertex_error_pct},
+           {"mean_normal_error_deg", clip.mean_normal_error_deg},
+           {"bone_length_drift_pct", clip.bone_length_drift_pct},
+           {"joint_rotation_drift_deg", clip.joint_rotation_drift_deg},
+           {"baseline_mean_E", base.mean_e},
+           {"baseline_max_vertex_error_pct", base.max_vertex_error_pct},
+           {"baseline_mean_vertex_error_pct", base.mean_vertex_error_pct},
+           {"max_px_for_1px_error",
+            FiniteOrNull(proto::MaxPixelHeightForBudget(clip.max_vertex_error_pct / 100.0, 1.0))}});
+    }
+    level["per_clip"] = std::move(per_clip);
     levels.push_back(std::move(level));
   }
   report["levels"] = std::move(levels);

@@ -58,7 +58,7 @@ pipeline::BakeRequest MakePipelineRequest(const api::BakeRequest& resolved,
                                           const std::string& animation, int bake_threads,
                                           core::SimdChoice simd) {
   pipeline::BakeRequest request;
-  request.animation = animation;
+  request.animations = {animation};
   request.fps = resolved.fps;
   request.levels = resolved.levels;
   request.all_levels = resolved.all_levels;

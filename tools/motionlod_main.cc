@@ -1,9 +1,9 @@
 // motionlod: the command-line bake tool.
 //   motionlod info CHARACTER
-//   motionlod rank CHARACTER [--motion M] [--animation NAME] [--fps F] [--lock J,...] [--json]
-//   motionlod bake CHARACTER [--motion M] [--animation NAME] [--levels 30,20,10,5 | --all-levels]
+//   motionlod rank CHARACTER [--motion M] [--animation NAME]... [--fps F] [--lock J,...] [--json]
+//   motionlod bake CHARACTER [--motion M] [--animation NAME]... [--levels 30,20,10,5 | --all-levels]
 //                  [--variant vpno+pd] [--fps F] [--lock J,...] [--threads N] [--curves] --out DIR
-//   motionlod export CHARACTER [--motion M] [--animation NAME] [--variant vpno+pd] [--fps F]
+//   motionlod export CHARACTER [--motion M] [--animation NAME]... [--variant vpno+pd] [--fps F]
 //                    [--lock J,...] [--joints N] [--level-set DIR/levels.mlod] --out FILE.glb
 //   motionlod plot REPORT.json -o FIG.svg
 // Exit codes: 0 success, 2 bad input (usage, unreadable or invalid files, impossible
@@ -45,7 +45,7 @@ int Fail(const Status& status, int code = kExitBadInput) {
 struct CommonOptions {
   std::string character;
   std::string motion;
-  std::string animation;
+  std::vector<std::string> animations;
   double fps = 0;
   std::vector<std::string> locked;
   std::string ranking = "greedy";
@@ -57,7 +57,9 @@ void AddCommon(CLI::App* app, CommonOptions& o) {
   app->add_option("CHARACTER", o.character, "character file (glTF/GLB, FBX, Collada, BVH, X, SMD)")
       ->required();
   app->add_option("--motion", o.motion, "separate motion file, retargeted onto the character by joint name");
-  app->add_option("--animation", o.animation, "animation name (default: the first)");
+  app->add_option("--animation", o.animations,
+                  "a clip to bake, by animation name; repeat for several (default: every animation "
+                  "of the motion source, all with one reduced skeleton per level)");
   app->add_option("--fps", o.fps, "sampling rate in frames per second (default: the source's)")
       ->check(CLI::Range(0.0, 1000.0));
   app->add_option("--lock", o.locked, "joints no level removes (sockets, IK targets)")->delimiter(',');
@@ -86,7 +88,8 @@ std::string ReadFileOrEmpty(const std::string& path) {
 std::array<uint8_t, 32> SourceHash(const CommonOptions& o) {
   std::string key = "character:" + io::Sha256Hex(ReadFileOrEmpty(o.character));
   if (!o.motion.empty()) key += ";motion:" + io::Sha256Hex(ReadFileOrEmpty(o.motion));
-  key += ";animation:" + o.animation + ";fps:" + std::to_string(o.fps);
+  for (const std::string& animation : o.animations) key += ";animation:" + animation;
+  key += ";fps:" + std::to_string(o.fps);
   const std::string hex = io::Sha256Hex(key);
   std::array<uint8_t, 32> digest{};
   for (size_t q = 0; q < digest.size(); ++q) digest[q] = static_cast<uint8_t>(std::stoi(hex.substr(2 * q, 2), nullptr, 16));
@@ -103,7 +106,7 @@ StatusOr<pipeline::BakeRequest> MakeRequest(const CommonOptions& o) {
     if (!motion.ok()) return motion.status();
     request.motion = *motion;
   }
-  request.animation = o.animation;
+  request.animations = o.animations;
   request.fps = o.fps;
   request.locked_joints = o.locked;
   auto ranking = core::ParseRankingMethod(o.ranking);
@@ -254,7 +257,8 @@ int RunExport(const CommonOptions& o, const std::string& variant, int joints,
   auto request = MakeRequest(o);
   if (!request.ok()) return Fail(request.status());
   if (joints == 0) joints = static_cast<int>(request->character->character().skeleton.parents.size());
-  std::string level_set, animation = o.animation;
+  // The first clip: the first one asked for, else the first of the file.
+  std::string level_set, animation = o.animations.empty() ? std::string() : o.animations.front();
   if (!level_set_path.empty()) {
     std::ifstream in(level_set_path, std::ios::binary);
     if (!in) return Fail(InvalidArgument("cannot read '" + level_set_path + "'"));
@@ -267,7 +271,7 @@ int RunExport(const CommonOptions& o, const std::string& variant, int joints,
     auto baked = pipeline::Bake(*request, [&](const pipeline::BakeProgress& p) { bar.Update(p); });
     if (!baked.ok()) return Fail(baked.status());
     level_set = std::move(baked->level_set);
-    animation = baked->report["motion"]["name"].get<std::string>();
+    animation = baked->report["clips"][0]["name"].get<std::string>();
   }
   auto exported = pipeline::ExportLevelGltf(*request->character, level_set, joints, animation);
   if (!exported.ok()) {

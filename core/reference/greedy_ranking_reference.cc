@@ -1,5 +1,6 @@
 #include "core/reference/greedy_ranking_reference.h"
 
+#include <algorithm>
 #include <limits>
 #include <memory>
 #include <vector>
@@ -22,9 +23,9 @@ StatusOr<JointRanking> GreedyRankingReference(const GreedyRankingJob& job) {
   for (const std::string& name : job.locked_joints) locked[c.FindJoint(name)] = true;
   for (int j = 0; j < n; ++j) ranking.locked_count += locked[j];
   for (int step = 0; step < n - ranking.locked_count; ++step) {
-    int best = -1;
-    double best_max = 0, best_mean_e = 0;
-    for (int j = n - 1; j >= 0; --j) {  // ties go to the higher index: the first found
+    std::vector<int> joints;
+    std::vector<double> max_pct, mean_e;
+    for (int j = 0; j < n; ++j) {
       if (!keep[j] || locked[j]) continue;
       const auto flags = std::make_unique<bool[]>(n);
       for (int k = 0; k < n; ++k) flags[k] = keep[k] && k != j;
@@ -32,13 +33,12 @@ StatusOr<JointRanking> GreedyRankingReference(const GreedyRankingJob& job) {
       if (!level.ok()) return level.status();
       auto solved = (*probe)->SolveOptimized(*level);
       if (!solved.ok()) return solved.status();
-      const double max = solved->optimized.max_vertex_error_pct, mean_e = solved->optimized.mean_e;
-      if (best < 0 || max < best_max || (max == best_max && mean_e < best_mean_e)) {
-        best = j;
-        best_max = max;
-        best_mean_e = mean_e;
-      }
+      joints.push_back(j);
+      max_pct.push_back(solved->optimized.max_vertex_error_pct);
+      mean_e.push_back(solved->optimized.mean_e);
     }
+    const int best = GreedyPick(joints, max_pct, mean_e);
+    const double best_max = max_pct[std::find(joints.begin(), joints.end(), best) - joints.begin()];
     keep[best] = false;
     ranking.priority[best] = best_max;
     ranking.removal_order.push_back(best);

@@ -1,7 +1,6 @@
 // The naive reference for the greedy removal order (core/greedy_ranking.h): at each step
 // every candidate's level is solved with every figure (PreparedMotion::SolveOptimized on
-// the probe frames) and the lowest (maximum vertex error, mean E, then the higher index)
-// is removed.
+// the probe frames) and GreedyPick chooses among them.
 #pragma once
 
 #include <span>

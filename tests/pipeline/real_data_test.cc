@@ -705,7 +705,7 @@ TEST_F(RealData, BakeWritesALevelSetThatDecodesToTheSolvedMatrices) {
   ASSERT_TRUE(asset.ok());
   BakeRequest request;
   request.character = *asset;
-  request.animation = "Walk";
+  request.animations = {"Walk"};
   request.levels = {24, 12, 5};
   request.ranking_method = core::RankingMethod::kPaper;
   request.threads = 2;

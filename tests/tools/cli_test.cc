@@ -1,6 +1,7 @@
 // The motionlod command as users run it: a real process, real files, exit codes.
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -152,15 +153,36 @@ TEST_F(Cli, AnUnknownSimdSettingIsAUsageError) {
 }
 
 TEST_F(Cli, RankPrintsTheRemovalOrderWithTheRootLast) {
-  const ProcessResult run = Exec("rank " + Sample() + " --animation Running_A --json");
-  ASSERT_EQ(run.exit_code, 0) << run.output;
-  const nlohmann::json table = nlohmann::json::parse(run.output);
-  ASSERT_EQ(table.size(), 23u);
-  EXPECT_EQ(table.back()["index"], 0);
-  EXPECT_FALSE(table.back()["removable"].get<bool>());
-  for (size_t r = 1; r + 1 < table.size(); ++r) {
-    EXPECT_LE(table[r - 1]["priority"].get<double>(), table[r]["priority"].get<double>());
+  // The paper's order: by priority.
+  const ProcessResult paper_run = Exec("rank " + Sample() + " --animation Running_A --ranking paper --json");
+  ASSERT_EQ(paper_run.exit_code, 0) << paper_run.output;
+  const nlohmann::json paper = nlohmann::json::parse(paper_run.output);
+  ASSERT_EQ(paper.size(), 23u);
+  EXPECT_EQ(paper.back()["index"], 0);
+  EXPECT_FALSE(paper.back()["removable"].get<bool>());
+  for (size_t r = 1; r + 1 < paper.size(); ++r) {
+    EXPECT_LE(paper[r - 1]["priority"].get<double>(), paper[r]["priority"].get<double>());
+    EXPECT_EQ(paper[r]["paper_rank"], r + 1);
+    EXPECT_TRUE(paper[r]["removal_error_pct"].is_null());
   }
+  // The default, greedy by error: every removable joint with the error its removal left,
+  // the paper's rank beside it.
+  const ProcessResult greedy_run = Exec("rank " + Sample() + " --animation Running_A --json");
+  ASSERT_EQ(greedy_run.exit_code, 0) << greedy_run.output;
+  const nlohmann::json greedy = nlohmann::json::parse(greedy_run.output);
+  ASSERT_EQ(greedy.size(), 23u);
+  EXPECT_EQ(greedy.back()["index"], 0);
+  std::vector<int> paper_ranks;
+  for (size_t r = 0; r + 1 < greedy.size(); ++r) {
+    EXPECT_GE(greedy[r]["removal_error_pct"].get<double>(), 0.0);
+    paper_ranks.push_back(greedy[r]["paper_rank"].get<int>());
+  }
+  std::sort(paper_ranks.begin(), paper_ranks.end());
+  for (size_t r = 0; r < paper_ranks.size(); ++r) EXPECT_EQ(paper_ranks[r], static_cast<int>(r) + 1);
+  EXPECT_NE(greedy, paper);
+  const ProcessResult wrong = Exec("rank " + Sample() + " --ranking random");
+  EXPECT_EQ(wrong.exit_code, 2);
+  EXPECT_NE(wrong.output.find("expected greedy or paper"), std::string::npos) << wrong.output;
 }
 
 TEST_F(Cli, BadInputExitsWithTwoAndWritesNothing) {
