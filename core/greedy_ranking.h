@@ -29,7 +29,7 @@
 namespace motionlod::core {
 
 struct GreedyRankingJob {
-  static constexpr int kDefaultProbeFramesPerClip = 16;
+  static constexpr int kDefaultProbeFramesPerClip = 8;
 
   const PreparedMotion* prepared = nullptr;
   std::span<const std::string> locked_joints;  // names; never removed
