@@ -5,6 +5,7 @@
 #include <limits>
 #include <memory>
 #include <numeric>
+#include <optional>
 #include <vector>
 
 #include "core/internal/level_errors.h"
@@ -14,6 +15,8 @@
 
 namespace motionlod::core {
 namespace {
+
+using internal::Figures;
 
 constexpr double kInfinity = std::numeric_limits<double>::infinity();
 
@@ -35,25 +38,48 @@ bool Before(const Score& sa, int a, const Score& sb, int b) {
 // The largest value that ties with `value` (GreedyPick).
 double TieLimit(double value) { return value + kGreedyTieTolerance * std::abs(value); }
 
-// A level solved on the probe: decided against `bound_pct` first
-// where it is finite, exactly where it is within it.
+// The score of the level SolveLevel writes on the probe (the solution, or the reparented
+// level where the solution is worse: KeepNoWorseThanReparenting), or of the reparented
+// level alone. Decided against `bound_pct` first where it is finite, exact within it.
 StatusOr<Score> ScoreLevel(const internal::PreparedData& probe, const ReducedSkeleton& level,
-                           double bound_pct) {
+                           bool reparented_only, double bound_pct) {
+  const double height = probe.character->height();
+  const auto decide = [&](const internal::DeltaView& delta, double within_pct,
+                          Figures figures) -> std::optional<LevelErrors> {
+    LevelErrors errors;
+    if (std::isfinite(within_pct)) {
+      internal::EvaluateErrors(probe, delta, level.kept_joints, internal::Figures::kMaxVertexError,
+                               errors, within_pct / 100.0 * height);
+      if (errors.max_vertex_error_pct > within_pct) return std::nullopt;
+    }
+    internal::EvaluateErrors(probe, delta, level.kept_joints, figures, errors);
+    if (figures == internal::Figures::kQuadratic) {
+      internal::EvaluateErrors(probe, delta, level.kept_joints, internal::Figures::kMaxVertexError, errors);
+    }
+    return errors;
+  };
+  const internal::DeltaView reparented = internal::BaselineDelta(probe, level);
+  if (reparented_only) {
+    const auto errors = decide(reparented, bound_pct, internal::Figures::kQuadratic);
+    if (!errors) return Score{std::nextafter(bound_pct, kInfinity), kInfinity, true};
+    return Score{errors->max_vertex_error_pct, errors->mean_e, false};
+  }
   auto solution = internal::SolveVariant(probe, level);
   if (!solution.ok()) return solution.status();
-  const internal::DeltaView delta = solution->Delta(probe, level);
-  const double height = probe.character->height();
-  LevelErrors errors;
-  if (std::isfinite(bound_pct)) {
-    internal::EvaluateErrors(probe, delta, level.kept_joints, internal::Figures::kMaxVertexError,
-                             errors, bound_pct / 100.0 * height);
-    if (errors.max_vertex_error_pct > bound_pct) {
-      return Score{errors.max_vertex_error_pct, kInfinity, true};
-    }
+  const internal::DeltaView solved = solution->Delta(probe, level);
+  if (IsRigid(probe.settings.variant) && !probe.original_rotations) {
+    const auto errors = decide(solved, bound_pct, internal::Figures::kQuadratic);
+    if (!errors) return Score{std::nextafter(bound_pct, kInfinity), kInfinity, true};
+    return Score{errors->max_vertex_error_pct, errors->mean_e, false};
   }
-  internal::EvaluateErrors(probe, delta, level.kept_joints, internal::Figures::kMaxVertexError, errors);
-  internal::EvaluateErrors(probe, delta, level.kept_joints, internal::Figures::kQuadratic, errors);
-  return Score{errors.max_vertex_error_pct, errors.mean_e, false};
+  // The reparented level bounds what is written: the solution counts only within it.
+  const LevelErrors base = *decide(reparented, kInfinity, internal::Figures::kAll);
+  const auto own = decide(solved, std::min(bound_pct, base.max_vertex_error_pct), internal::Figures::kAll);
+  const bool solution_written = own && own->max_vertex_error_pct <= base.max_vertex_error_pct &&
+                                own->mean_vertex_error_pct <= base.mean_vertex_error_pct;
+  const LevelErrors& written = solution_written ? *own : base;
+  if (written.max_vertex_error_pct > bound_pct) return Score{written.max_vertex_error_pct, kInfinity, true};
+  return Score{written.max_vertex_error_pct, written.mean_e, false};
 }
 
 }  // namespace
@@ -136,7 +162,7 @@ StatusOr<JointRanking> GreedyRankingJob::Run(const PieceRunner& run) const {
       for (int k = 0; k < n; ++k) flags[k] = keep[k] && k != j;
       auto level = ReduceSkeleton(c, std::span<const bool>(flags.get(), n));
       if (!level.ok()) return level.status();
-      return ScoreLevel(d, *level, bound);
+      return ScoreLevel(d, *level, reparented, bound);
     };
     std::vector<StatusOr<Score>> scores(candidates.size(), Score{});
     scores[0] = score(candidates[0], kInfinity);

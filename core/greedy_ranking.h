@@ -5,7 +5,8 @@
 // chain's links one after another and protects trunk joints whose removal costs little.
 //
 // Each step scores every candidate (a kept joint, never the root or a locked one) by
-// solving the level without it (the variant's own solution, step 4) on the probe frames,
+// solving the level without it on the probe frames as PreparedMotion::SolveLevel does (the
+// variant's solution, or the reparented level where the solution is worse),
 // up to probe_frames_per_clip evenly spaced frames of each clip (0: all), and taking its
 // maximum vertex error; the lowest wins, ties by the lower mean E, then the higher joint
 // index (GreedyPick: values within kGreedyTieTolerance of each other tie, so that the
@@ -14,7 +15,7 @@
 // scored first, and every other candidate's maximum is only decided against its (the
 // search stops at the first vertex past it, core/internal/max_vertex_error.h), found
 // exactly only where it is within it.
-// The naive reference, every candidate scored by PreparedMotion::SolveOptimized, is
+// The naive reference, every candidate scored by PreparedMotion::SolveLevel, is
 // core/reference/greedy_ranking_reference.h.
 #pragma once
 
@@ -32,8 +33,12 @@ struct GreedyRankingJob {
   static constexpr int kDefaultProbeFramesPerClip = 8;
 
   const PreparedMotion* prepared = nullptr;
-  std::span<const std::string> locked_joints;  // names; never removed
+  std::span<const std::string> locked_joints = {};  // names; never removed
   int probe_frames_per_clip = kDefaultProbeFramesPerClip;  // >= 0; 0 = every frame
+  // Score the reparented level (kept joints keep their original matrices, nothing solved)
+  // instead of the variant's solution: plain reparenting's own greedy order, the strongest
+  // form of what engines ship, to compare with.
+  bool reparented = false;
 
   Status Validate() const;
   // The order, with JointRanking::priority the probe's maximum vertex error (percent of the

@@ -31,11 +31,16 @@ StatusOr<JointRanking> GreedyRankingReference(const GreedyRankingJob& job) {
       for (int k = 0; k < n; ++k) flags[k] = keep[k] && k != j;
       auto level = ReduceSkeleton(c, std::span<const bool>(flags.get(), n));
       if (!level.ok()) return level.status();
-      auto solved = (*probe)->SolveOptimized(*level);
-      if (!solved.ok()) return solved.status();
+      auto errors = job.reparented ? (*probe)->BaselineErrors(*level)
+                                   : [&]() -> StatusOr<LevelErrors> {
+                                       auto solved = (*probe)->SolveLevel(*level);
+                                       if (!solved.ok()) return solved.status();
+                                       return solved->optimized;
+                                     }();
+      if (!errors.ok()) return errors.status();
       joints.push_back(j);
-      max_pct.push_back(solved->optimized.max_vertex_error_pct);
-      mean_e.push_back(solved->optimized.mean_e);
+      max_pct.push_back(errors->max_vertex_error_pct);
+      mean_e.push_back(errors->mean_e);
     }
     const int best = GreedyPick(joints, max_pct, mean_e);
     const double best_max = max_pct[std::find(joints.begin(), joints.end(), best) - joints.begin()];

@@ -1,6 +1,7 @@
 // The naive reference for the greedy removal order (core/greedy_ranking.h): at each step
-// every candidate's level is solved with every figure (PreparedMotion::SolveOptimized on
-// the probe frames) and GreedyPick chooses among them.
+// every candidate's level is solved with every figure (PreparedMotion::SolveLevel on
+// the probe frames; BaselineErrors where the job scores reparented levels) and GreedyPick
+// chooses among them.
 #pragma once
 
 #include <span>

@@ -132,7 +132,7 @@ TEST(GreedyRanking, EqualsTheExhaustiveSearchInEveryVariant) {
   for (Variant variant : {Variant::kVP, Variant::kVPNO, Variant::kVPPD, Variant::kVPNOPD}) {
     const auto prepared = Prepare(character, motion, variant);
     for (int probe : {0, 4}) {
-      const GreedyRankingJob job{prepared.get(), locked, probe};
+      const GreedyRankingJob job{prepared.get(), locked, probe, false};
       const JointRanking fast = *job.Run();
       const JointRanking reference = *GreedyRankingReference(job);
       EXPECT_EQ(fast.removal_order, reference.removal_order) << VariantName(variant) << " probe " << probe;
@@ -142,6 +142,12 @@ TEST(GreedyRanking, EqualsTheExhaustiveSearchInEveryVariant) {
       EXPECT_EQ(fast.priority[character->FindJoint("arm_l")], std::numeric_limits<double>::infinity());
     }
   }
+  // Plain reparenting's own order, scored without a solve.
+  const auto prepared_vp = Prepare(character, motion, Variant::kVP);
+  const GreedyRankingJob reparented{prepared_vp.get(), {}, 0, true};
+  const JointRanking fast = *reparented.Run();
+  EXPECT_EQ(fast.removal_order, GreedyRankingReference(reparented)->removal_order);
+  EXPECT_EQ(fast.priority, GreedyRankingReference(reparented)->priority);
   EXPECT_EQ(GreedyRankingJob{}.Validate().code(), StatusCode::kInvalidArgument);
   const auto prepared = Prepare(character, motion, Variant::kVP);
   const std::vector<std::string> unknown = {"no_such_joint"};
