@@ -4,7 +4,10 @@
 // in docs/level-format.md; this header is the API.
 //
 // Letters (as in core/types.h): j joint of the original skeleton (n of them), l level
-// (L), t frame (T), s slot of a kept joint within a level (m kept joints).
+// (L), t frame (T), s slot of a kept joint within a level (m kept joints), c clip (C).
+// A level set covers the clips (animations) of one character with one reduced skeleton
+// per level: the frames of every clip, concatenated clip after clip, are the level's T
+// frames, and the clip table says which frames are which clip.
 // K'_s(t): the skinning matrix of kept joint s at frame t. It maps a bind-pose,
 // model-space point to posed model space: p' = A p + b, stored as the top three rows of
 // the 4x4 affine [A | b], row-major, float32:
