@@ -43,7 +43,7 @@ inline constexpr size_t kV1OffsetReserved1 = 104;  // u64, 0
 inline constexpr uint32_t kDirectoryEntrySize = 24;
 inline constexpr uint32_t kNoLevel = 0xFFFFFFFFu;  // `level` of a global section
 
-// Level record (version 1.0: 32 bytes), one per level in the level table.
+// Level record (versions 1.0 and 2.0: 32 bytes), one per level in the level table.
 inline constexpr uint32_t kLevelRecordSize = 32;
 inline constexpr size_t kRecordOffsetKeptCount = 0;  // u32 m
 inline constexpr size_t kRecordOffsetFigures = 4;    // f32[5], LevelFigures order

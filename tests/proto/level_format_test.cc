@@ -1249,8 +1249,8 @@ TEST(Version1, KeepsItsOwnRules) {
   test_v1::Version1Options later = extra;
   later.minor_version = 2;
   later.reserved = 3;
-  StatusOr<LevelSetView> view =
-      DecodeLevelSet(AlignedBytes::CopyOf(test_v1::EncodeVersion1(data, later)).bytes());
+  const AlignedBytes later_bytes = AlignedBytes::CopyOf(test_v1::EncodeVersion1(data, later));
+  StatusOr<LevelSetView> view = DecodeLevelSet(later_bytes.bytes());
   ASSERT_TRUE(view.ok()) << view.status().ToString();
   EXPECT_EQ(view->minor_version(), 2);
   EXPECT_EQ(ToLevelSetData(*view), data);
