@@ -758,10 +758,9 @@ StatusOr<LevelSetView> LevelSetDecoder::Decode(std::span<const std::byte> bytes,
     if ((flags & ~kKnownLevelSetFlags) != 0) {
       return malformed(StrCat("unknown flag bits ", flags & ~kKnownLevelSetFlags));
     }
-    const bool reserved_zero =
-        v1 ? Load<uint32_t>(data + internal::kV1OffsetReserved0) == 0 &&
-                 Load<uint64_t>(data + internal::kV1OffsetReserved1) == 0
-           : Load<uint32_t>(data + internal::kOffsetReserved) == 0;
+    const bool reserved_zero = v1 ? Load<uint32_t>(data + internal::kV1OffsetReserved0) == 0 &&
+                                        Load<uint64_t>(data + internal::kV1OffsetReserved1) == 0
+                                  : Load<uint32_t>(data + internal::kOffsetReserved) == 0;
     if (!reserved_zero) return malformed("reserved header fields are not zero");
   }
   if (joint_count == 0 || joint_count > kMaxJointCount) {
@@ -872,9 +871,8 @@ StatusOr<LevelSetView> LevelSetDecoder::Decode(std::span<const std::byte> bytes,
               source.source_hash.size());
   source.settings_hash = Load<uint64_t>(data + internal::kOffsetSettingsHash);
   source.variant_name = {reinterpret_cast<const char*>(data + variant.offset), variant.size};
-  std::string problem =
-      ReadNames({data + names.offset, names.size}, n, "the joint names section", "joint",
-                source.joint_names);
+  std::string problem = ReadNames({data + names.offset, names.size}, n, "the joint names section",
+                                  "joint", source.joint_names);
   if (!problem.empty()) return malformed(std::move(problem));
   if (!v1) {
     // The clip table: C records, then C length-prefixed names filling the rest exactly.

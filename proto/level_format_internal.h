@@ -88,9 +88,9 @@ struct WriterOptions {
   uint32_t header_size = kHeaderSize;             // multiple of 16, >= kHeaderSize
   uint32_t level_record_size = kLevelRecordSize;  // multiple of 4, >= kLevelRecordSize
   uint32_t clip_record_size = kClipRecordSize;    // multiple of 8, >= kClipRecordSize
-  uint8_t extension_fill = 0;  // bytes past the known header, level and clip records
-  uint32_t extra_flags = 0;                       // or-ed into the flags, unvalidated
-  std::vector<ExtraSection> extra_sections;       // appended after the known sections
+  uint8_t extension_fill = 0;                // bytes past the known header, level and clip records
+  uint32_t extra_flags = 0;                  // or-ed into the flags, unvalidated
+  std::vector<ExtraSection> extra_sections;  // appended after the known sections
 };
 
 // Validates `data` (as ValidateLevelSet, on `run`) and writes it as `options` say.

@@ -1,9 +1,9 @@
 // libFuzzer target for the level-set decoder: any input must decode or fail with a
 // Status, never crash, over-read or trip a sanitizer; what decodes must re-encode to
 // the same bytes and extract (by level, and by level and clip) to files that decode again.
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
-#include <algorithm>
 #include <cstdlib>
 #include <span>
 

@@ -622,9 +622,9 @@ TEST(DecodeLevelSet, WithoutChecksumNeverFailsOtherThanByStatusOnCorruptBytes) {
   // sanitizers to catch over-reads).
   LevelSetData clips = MakeClipSample();
   clips.levels.resize(1);
-  for (const std::string& file : {EncodeLevelSet(MakeSample(1)).value(),
-                                  EncodeLevelSet(clips).value(),
-                                  test_v1::EncodeVersion1(MakeSample(1))}) {
+  for (const std::string& file :
+       {EncodeLevelSet(MakeSample(1)).value(), EncodeLevelSet(clips).value(),
+        test_v1::EncodeVersion1(MakeSample(1))}) {
     AlignedBytes bytes = AlignedBytes::CopyOf(file);
     const DecodeOptions no_checksum{.verify_checksum = false};
     ASSERT_TRUE(DecodeLevelSet(bytes.bytes(), no_checksum).ok());
@@ -819,8 +819,8 @@ TEST(DecodeLevelSet, RejectsNonZeroPadding) {
 
 TEST(DecodeLevelSet, RejectsReservedFieldsAndUnknownFlagsOfTheCurrentMinorVersion) {
   const AlignedBytes bytes = Encode(MakeSample());
-  const Status reserved = DecodeEdited(
-      bytes, [](AlignedBytes& b) { Poke<uint32_t>(b, internal::kOffsetReserved, 1); });
+  const Status reserved =
+      DecodeEdited(bytes, [](AlignedBytes& b) { Poke<uint32_t>(b, internal::kOffsetReserved, 1); });
   EXPECT_THAT(reserved.message(), HasSubstr("reserved"));
   const Status flags = DecodeEdited(
       bytes, [](AlignedBytes& b) { Poke<uint32_t>(b, internal::kOffsetFlags, 1u << 5); });
@@ -871,7 +871,6 @@ TEST(DecodeLevelSet, AcceptsLaterMinorVersionAndSkipsWhatItDoesNotKnow) {
   EXPECT_EQ(single->flags(), 0u);
   EXPECT_EQ(ToLevelSetData(*single).levels[0], data.levels[2]);
 }
-
 
 // ---------------------------------------------------------------------------------
 // Clips (version 2.0).
@@ -970,9 +969,9 @@ TEST(Clips, TableLayoutIsAsDocumented) {
   const AlignedBytes bytes = Encode(MakeClipSample());
   EXPECT_EQ(Peek<uint16_t>(bytes, internal::kOffsetMajorVersion), 2);
   EXPECT_EQ(Peek<uint16_t>(bytes, internal::kOffsetMinorVersion), 0);
-  EXPECT_EQ(Peek<uint32_t>(bytes, 100), 3u);  // clip_count
+  EXPECT_EQ(Peek<uint32_t>(bytes, 100), 3u);   // clip_count
   EXPECT_EQ(Peek<uint32_t>(bytes, 104), 16u);  // clip_record_size
-  EXPECT_EQ(Peek<uint32_t>(bytes, 108), 0u);  // reserved
+  EXPECT_EQ(Peek<uint32_t>(bytes, 108), 0u);   // reserved
   EXPECT_EQ(Peek<uint32_t>(bytes, internal::kOffsetSectionCount), 5u + 3u * 3u);
   EXPECT_EQ(Peek<double>(bytes, internal::kOffsetFps), 29.97);
   const size_t entry = internal::kHeaderSize + 4 * internal::kDirectoryEntrySize;
@@ -1065,7 +1064,9 @@ TEST(ExtractLevelClip, RejectsLevelOrClipOutOfRange) {
   EXPECT_THAT(clip.message(), HasSubstr("clip 3"));
 }
 
-TEST(ValidateLevelSet, AcceptsTheClipSample) { EXPECT_TRUE(ValidateLevelSet(MakeClipSample()).ok()); }
+TEST(ValidateLevelSet, AcceptsTheClipSample) {
+  EXPECT_TRUE(ValidateLevelSet(MakeClipSample()).ok());
+}
 
 TEST(ValidateLevelSet, RejectsEachInvalidClip) {
   const InvalidCase cases[] = {
@@ -1140,8 +1141,7 @@ TEST(DecodeLevelSet, RejectsInvalidClipTables) {
   const Case cases[] = {
       {"gap", [&](AlignedBytes& b) { Poke<uint32_t>(b, table + 16 + 0, 4); },
        "clip 1 (\"jump\") starts at frame 4"},
-      {"no frame", [&](AlignedBytes& b) { Poke<uint32_t>(b, table + 32 + 4, 0); },
-       "has no frame"},
+      {"no frame", [&](AlignedBytes& b) { Poke<uint32_t>(b, table + 32 + 4, 0); }, "has no frame"},
       {"past the end", [&](AlignedBytes& b) { Poke<uint32_t>(b, table + 32 + 4, 2); },
        "ends at frame 7"},
       {"fps NaN",
@@ -1149,7 +1149,8 @@ TEST(DecodeLevelSet, RejectsInvalidClipTables) {
          Poke<double>(b, table + 16 + 8, std::numeric_limits<double>::quiet_NaN());
        },
        "clip 1 (\"jump\"): fps"},
-      {"header fps not the first clip's", [&](AlignedBytes& b) { Poke<double>(b, table + 8, 30.0); },
+      {"header fps not the first clip's",
+       [&](AlignedBytes& b) { Poke<double>(b, table + 8, 30.0); },
        "a level set's fps is its first clip's"},
       {"name not UTF-8", [&](AlignedBytes& b) { Poke<uint8_t>(b, names + 2, 0xFF); },
        "the name of clip 0 is not valid UTF-8"},
@@ -1176,7 +1177,8 @@ TEST(DecodeLevelSet, RejectsInvalidClipTables) {
          Poke<uint32_t>(b, internal::kOffsetClipRecordSize, 0xFFFFFFF8u);
        },
        "the clip table is"},
-      {"clip table kind", [](AlignedBytes& b) {
+      {"clip table kind",
+       [](AlignedBytes& b) {
          Poke<uint32_t>(b, internal::kHeaderSize + 4 * internal::kDirectoryEntrySize, 6);
        },
        "section 4 is of kind 6"},
@@ -1236,8 +1238,9 @@ TEST(Version1, KeepsItsOwnRules) {
   // 1.0: offset 100 is reserved, and there are 4 + 3L sections.
   test_v1::Version1Options reserved;
   reserved.reserved = 3;
-  Status status = DecodeLevelSet(AlignedBytes::CopyOf(test_v1::EncodeVersion1(data, reserved)).bytes())
-                      .status();
+  Status status =
+      DecodeLevelSet(AlignedBytes::CopyOf(test_v1::EncodeVersion1(data, reserved)).bytes())
+          .status();
   EXPECT_EQ(status.code(), StatusCode::kDataLoss);
   EXPECT_THAT(status.message(), HasSubstr("reserved"));
   test_v1::Version1Options extra;
@@ -1257,7 +1260,8 @@ TEST(Version1, KeepsItsOwnRules) {
   // A 1.0 file's truncations are data loss too.
   const AlignedBytes v1 = AlignedBytes::CopyOf(test_v1::EncodeVersion1(MakeSample(1)));
   for (size_t size = 0; size < v1.size(); ++size) {
-    ASSERT_EQ(DecodeLevelSet(v1.bytes().first(size)).status().code(), StatusCode::kDataLoss) << size;
+    ASSERT_EQ(DecodeLevelSet(v1.bytes().first(size)).status().code(), StatusCode::kDataLoss)
+        << size;
   }
 }
 

@@ -19,9 +19,9 @@ namespace motionlod::proto::test_v1 {
 
 struct Version1Options {
   uint16_t minor_version = 0;
-  uint32_t reserved = 0;            // the u32 at header offset 100 (0 in 1.0)
-  std::string trailing_section;     // appended as a section of kind 40 when not empty
-  uint32_t extra_section_count = 0; // added to section_count (a malformed directory)
+  uint32_t reserved = 0;             // the u32 at header offset 100 (0 in 1.0)
+  std::string trailing_section;      // appended as a section of kind 40 when not empty
+  uint32_t extra_section_count = 0;  // added to section_count (a malformed directory)
 };
 
 // `data` as a version 1.x file; `data.clips` is ignored (1.x has none). No validation.
