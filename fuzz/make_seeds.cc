@@ -1,7 +1,9 @@
 // make_seeds OUT_DIR FILE...: seed inputs for the fuzzers whose inputs no data file is
 // directly: OUT_DIR/asset_wire_fuzz/<name> holds the worker's reply for each FILE (as
 // asset_wire_fuzz reads it: a kind byte, then the payload), and
-// OUT_DIR/level_format_fuzz/<name>.mlod a two-level bake of it (a few frames).
+// OUT_DIR/level_format_fuzz/<name>.mlod a two-level bake of it (a few frames); and, whatever
+// the files, OUT_DIR/level_format_fuzz/clips.mlod (three clips) and v1_0.mlod (a version 1.0
+// file), which bakes of one clip by this version do not cover.
 // Run by scripts/fuzz.sh; exits 1 when a file cannot be read or baked.
 #include <algorithm>
 #include <cstdio>
@@ -12,6 +14,8 @@
 #include "io/asset.h"
 #include "io/asset_wire.h"
 #include "pipeline/bake.h"
+#include "proto/level_format.h"
+#include "tests/proto/level_format_v1.h"
 
 namespace {
 
@@ -20,6 +24,30 @@ bool Write(const std::filesystem::path& path, const std::string& bytes) {
   std::ofstream out(path, std::ios::binary);
   out << bytes;
   return static_cast<bool>(out);
+}
+
+// A small level set by hand: 3 joints (a chain), two levels, five frames in three clips.
+motionlod::proto::LevelSetData SmallLevelSet() {
+  using namespace motionlod::proto;
+  LevelSetData data;
+  data.variant_name = "vpno";
+  data.frame_count = 5;
+  data.fps = 30;
+  data.joint_names = {"root", "spine", "head"};
+  data.parents = {-1, 0, 1};
+  for (const std::vector<uint16_t>& kept : {std::vector<uint16_t>{0, 1, 2}, {0, 2}}) {
+    LevelData level;
+    level.kept_joints = kept;
+    level.joint_map = ComputeJointMap(data.parents, kept).value();
+    for (uint32_t t = 0; t < data.frame_count; ++t) {
+      for (size_t s = 0; s < kept.size(); ++s) {
+        const float k[12] = {1, 0, 0, 0.1f * t, 0, 1, 0, float(s), 0, 0, 1, 0};
+        level.matrices.insert(level.matrices.end(), k, k + 12);
+      }
+    }
+    data.levels.push_back(std::move(level));
+  }
+  return data;
 }
 
 }  // namespace
@@ -32,6 +60,14 @@ int main(int argc, char** argv) {
   }
   const std::filesystem::path out = argv[1];
   int status = 0;
+  {
+    proto::LevelSetData clips = SmallLevelSet();
+    clips.clips = {{"walk", 0, 2, 30}, {"jump", 2, 2, 60}, {"idle", 4, 1, 24}};
+    const auto encoded = proto::EncodeLevelSet(clips);
+    if (!encoded.ok() || !Write(out / "level_format_fuzz" / "clips.mlod", *encoded)) status = 1;
+    const std::string v1 = proto::test_v1::EncodeVersion1(SmallLevelSet());
+    if (!Write(out / "level_format_fuzz" / "v1_0.mlod", v1)) status = 1;
+  }
   for (int a = 2; a < argc; ++a) {
     const std::string name = std::filesystem::path(argv[a]).filename().string();
     const auto asset = io::LoadAssetFile(argv[a]);

@@ -16,6 +16,7 @@
 namespace motionlod::proto {
 
 using internal::ExtraSection;
+using internal::kClipRecordSize;
 using internal::kDirectoryEntrySize;
 using internal::kGlobalSectionCount;
 using internal::kHeaderSize;
@@ -92,7 +93,18 @@ LevelSetRef HeaderRefOf(const LevelSetView& view) {
   source.variant_name = view.variant_name();
   source.joint_names.assign(view.joint_names().begin(), view.joint_names().end());
   source.parents = view.parents();
+  source.clips.reserve(view.clip_count());
+  for (const ClipView& clip : view.clips()) {
+    source.clips.push_back({clip.name, clip.first_frame, clip.frame_count, clip.fps});
+  }
   return source;
+}
+
+// The clips a file of `source` holds: its own, or the one unnamed clip of every frame.
+std::span<const ClipRef> ClipsToWrite(const LevelSetRef& source, ClipRef& single) {
+  if (!source.clips.empty()) return source.clips;
+  single = {std::string_view(""), 0, source.frame_count, source.fps};
+  return {&single, 1};
 }
 
 LevelRef RefOf(const LevelView& level) {
@@ -146,6 +158,63 @@ std::string CheckSkeleton(const LevelSetRef& source) {
   const auto duplicate = std::adjacent_find(sorted.begin(), sorted.end());
   if (duplicate != sorted.end()) {
     return StrCat("two joints are named \"", *duplicate, "\"");
+  }
+  return {};
+}
+
+// A clip named in a message once its name is known to be valid: `clip 2 ("run")`.
+std::string ClipLabel(size_t c, std::string_view name) {
+  return StrCat("clip ", c, " (\"", name, "\")");
+}
+
+// The clip table: in frame order, contiguous, covering every frame, each of at least one
+// frame at a finite positive fps, uniquely named, the first at the level set's fps.
+// Empty `clips` stand for one unnamed clip of every frame at the level set's fps.
+std::string CheckClips(const LevelSetRef& source) {
+  const std::span<const ClipRef> clips = source.clips;
+  if (clips.empty()) return {};
+  if (clips.size() > source.frame_count) {
+    return StrCat("the level set has ", clips.size(), " clips for ", source.frame_count,
+                  " frames (at most one clip per frame)");
+  }
+  uint64_t next_frame = 0;  // <= frame_count + 2^32: no wrap
+  for (size_t c = 0; c < clips.size(); ++c) {
+    const ClipRef& clip = clips[c];
+    const bool single = clips.size() == 1;
+    const std::string problem = NameProblem(clip.name, /*allow_empty=*/single);
+    if (!problem.empty()) {
+      return StrCat("the name of clip ", c, " ", problem,
+                    clip.name.empty() ? " (only a level set's single clip may be unnamed)" : "");
+    }
+    if (clip.first_frame != next_frame) {
+      return StrCat(ClipLabel(c, clip.name), " starts at frame ", clip.first_frame,
+                    "; clips must be contiguous and in frame order (expected frame ", next_frame,
+                    ")");
+    }
+    if (clip.frame_count == 0) return StrCat(ClipLabel(c, clip.name), " has no frame");
+    if (!(std::isfinite(clip.fps) && clip.fps > 0)) {
+      return StrCat(ClipLabel(c, clip.name), ": fps is ", clip.fps, " (finite and > 0 expected)");
+    }
+    next_frame += clip.frame_count;
+    if (next_frame > source.frame_count) {
+      return StrCat(ClipLabel(c, clip.name), " ends at frame ", next_frame, ", past the ",
+                    source.frame_count, " frames of the level set");
+    }
+  }
+  if (next_frame != source.frame_count) {
+    return StrCat("the clips cover frames [0, ", next_frame, ") of ", source.frame_count,
+                  "; they must cover every frame");
+  }
+  if (clips.size() > 1) {
+    std::vector<std::string_view> sorted(clips.size());
+    for (size_t c = 0; c < clips.size(); ++c) sorted[c] = clips[c].name;
+    std::sort(sorted.begin(), sorted.end());
+    const auto duplicate = std::adjacent_find(sorted.begin(), sorted.end());
+    if (duplicate != sorted.end()) return StrCat("two clips are named \"", *duplicate, "\"");
+  }
+  if (clips[0].fps != source.fps) {
+    return StrCat("fps is ", source.fps, " but ", ClipLabel(0, clips[0].name), " plays at ",
+                  clips[0].fps, "; a level set's fps is its first clip's");
   }
   return {};
 }
@@ -307,7 +376,9 @@ std::string CheckLevelSet(const LevelSetRef& source, bool allow_unknown_flags,
   if (!(std::isfinite(source.fps) && source.fps > 0)) {
     return StrCat("fps is ", source.fps, " (finite and > 0 expected)");
   }
-  std::string problem = NameProblem(source.variant_name, /*allow_empty=*/true);
+  std::string problem = CheckClips(source);
+  if (!problem.empty()) return problem;
+  problem = NameProblem(source.variant_name, /*allow_empty=*/true);
   if (!problem.empty()) return StrCat("the variant name ", problem);
   problem = CheckSkeleton(source);
   if (!problem.empty()) return problem;
@@ -365,6 +436,12 @@ uint64_t JointNamesBytes(const LevelSetRef& source) {
   return bytes;
 }
 
+uint64_t ClipTableBytes(std::span<const ClipRef> clips, uint32_t clip_record_size) {
+  uint64_t bytes = uint64_t{clip_record_size} * clips.size();
+  for (const ClipRef& clip : clips) bytes += 2 + uint64_t{clip.name.size()};
+  return bytes;
+}
+
 Layout PlanLayout(const LevelSetRef& source, const WriterOptions& options) {
   const uint64_t n = source.parents.size();
   const uint64_t frame_count = source.frame_count;
@@ -377,6 +454,9 @@ Layout PlanLayout(const LevelSetRef& source, const WriterOptions& options) {
   add(SectionKind::kJointParents, kNoLevel, 4 * n);
   add(SectionKind::kLevelTable, kNoLevel,
       uint64_t{options.level_record_size} * source.levels.size());
+  ClipRef single;
+  add(SectionKind::kClipTable, kNoLevel,
+      ClipTableBytes(ClipsToWrite(source, single), options.clip_record_size));
   for (size_t l = 0; l < source.levels.size(); ++l) {
     const uint64_t m = source.levels[l].kept_joints.size();
     const auto level = static_cast<uint32_t>(l);
@@ -466,6 +546,10 @@ void WriteLevelSet(const LevelSetRef& source, const WriterOptions& options, cons
   std::memcpy(header + internal::kOffsetSourceHash, source.source_hash.data(),
               source.source_hash.size());
   Store<uint32_t>(header + internal::kOffsetLevelRecordSize, options.level_record_size);
+  ClipRef single;
+  const std::span<const ClipRef> clips = ClipsToWrite(source, single);
+  Store<uint32_t>(header + internal::kOffsetClipCount, static_cast<uint32_t>(clips.size()));
+  Store<uint32_t>(header + internal::kOffsetClipRecordSize, options.clip_record_size);
   put(header, sizeof header);
   fill(options.header_size - kHeaderSize, std::byte{options.extension_fill});
 
@@ -507,6 +591,20 @@ void WriteLevelSet(const LevelSetRef& source, const WriterOptions& options, cons
     put(record, sizeof record);
     fill(options.level_record_size - kLevelRecordSize, std::byte{options.extension_fill});
   }
+  begin_section();
+  for (const ClipRef& clip : clips) {
+    std::byte record[kClipRecordSize] = {};
+    Store<uint32_t>(record + internal::kClipOffsetFirstFrame, clip.first_frame);
+    Store<uint32_t>(record + internal::kClipOffsetFrameCount, clip.frame_count);
+    Store<double>(record + internal::kClipOffsetFps, clip.fps);
+    put(record, sizeof record);
+    fill(options.clip_record_size - kClipRecordSize, std::byte{options.extension_fill});
+  }
+  for (const ClipRef& clip : clips) {
+    const auto length = static_cast<uint16_t>(clip.name.size());
+    put(&length, sizeof length);
+    put(clip.name.data(), clip.name.size());
+  }
   for (const LevelRef& level : source.levels) {
     write_bytes(level.kept_joints.data(), level.kept_joints.size_bytes());
     write_bytes(level.joint_map.data(), level.joint_map.size_bytes());
@@ -522,6 +620,30 @@ void WriteLevelSet(const LevelSetRef& source, const WriterOptions& options, cons
   std::byte checksum[8];
   Store<uint64_t>(checksum, Xxh64(std::span<const std::byte>(sink.data(), layout.file_size - 8)));
   put(checksum, sizeof checksum);
+}
+
+// Reads `count` names, each a u16 byte length then that many bytes, that must fill `bytes`
+// exactly; the views point into `bytes`. A problem names `section` and the `item`.
+std::string ReadNames(std::span<const std::byte> bytes, uint64_t count, const char* section,
+                      const char* item, std::vector<std::string_view>& names) {
+  names.reserve(count);  // count <= bytes.size() / 2, checked by the callers
+  uint64_t at = 0;
+  for (uint64_t i = 0; i < count; ++i) {
+    if (bytes.size() - at < 2) {
+      return StrCat(section, " ends inside the length of ", item, " ", i);
+    }
+    const auto length = Load<uint16_t>(bytes.data() + at);
+    at += 2;
+    if (bytes.size() - at < length) {
+      return StrCat(section, " ends inside the name of ", item, " ", i);
+    }
+    names.emplace_back(reinterpret_cast<const char*>(bytes.data() + at), length);
+    at += length;
+  }
+  if (at != bytes.size()) {
+    return StrCat(section, " has ", bytes.size() - at, " bytes past the last name");
+  }
+  return {};
 }
 
 StatusOr<std::string> EncodeSource(const LevelSetRef& source, const WriterOptions& options) {
@@ -568,15 +690,19 @@ StatusOr<LevelSetView> LevelSetDecoder::Decode(std::span<const std::byte> bytes,
   }
   const auto major = Load<uint16_t>(data + internal::kOffsetMajorVersion);
   const auto minor = Load<uint16_t>(data + internal::kOffsetMinorVersion);
-  if (major != kLevelFormatMajorVersion) {
+  static_assert(kOldestReadableMajorVersion == 1 && kLevelFormatMajorVersion == 2);
+  if (major != 1 && major != kLevelFormatMajorVersion) {
     return Unsupported(StrCat("level format version ", major, ".", minor,
-                              " is not supported (this build reads ", kLevelFormatMajorVersion,
-                              ".x)"));
+                              " is not supported (this build reads versions 1.x and ",
+                              kLevelFormatMajorVersion, ".x)"));
   }
-  // A file of a later minor version may extend the header and the level records,
+  // 1.x has no clip table: one unnamed clip of every frame, at the header's fps.
+  const bool v1 = major == 1;
+  // A file of a later minor version may extend the header, the level and clip records,
   // set flag bits and fill reserved fields this build does not know, and append
-  // sections; one of this minor version or an earlier one may not.
-  const bool from_later_minor = minor > kLevelFormatMinorVersion;
+  // sections; one of a minor version this build knows may not (1.0 is the last 1.x).
+  const bool from_later_minor = minor > (v1 ? 0 : kLevelFormatMinorVersion);
+  const uint32_t global_sections = v1 ? internal::kV1GlobalSectionCount : kGlobalSectionCount;
   if (size < kHeaderSize + kTrailerSize) {
     return malformed(StrCat("truncated: ", size, " bytes cannot hold header and trailer"));
   }
@@ -620,14 +746,22 @@ StatusOr<LevelSetView> LevelSetDecoder::Decode(std::span<const std::byte> bytes,
     return malformed(StrCat("level record size ", level_record_size, " is invalid for version ",
                             major, ".", minor));
   }
+  const uint32_t clip_count = v1 ? 1 : Load<uint32_t>(data + internal::kOffsetClipCount);
+  const uint32_t clip_record_size =
+      v1 ? kClipRecordSize : Load<uint32_t>(data + internal::kOffsetClipRecordSize);
+  if (clip_record_size < kClipRecordSize || clip_record_size % 8 != 0 ||
+      (!from_later_minor && clip_record_size != kClipRecordSize)) {
+    return malformed(StrCat("clip record size ", clip_record_size, " is invalid for version ",
+                            major, ".", minor));
+  }
   if (!from_later_minor) {
     if ((flags & ~kKnownLevelSetFlags) != 0) {
       return malformed(StrCat("unknown flag bits ", flags & ~kKnownLevelSetFlags));
     }
-    if (Load<uint32_t>(data + internal::kOffsetReserved0) != 0 ||
-        Load<uint64_t>(data + internal::kOffsetReserved1) != 0) {
-      return malformed("reserved header fields are not zero");
-    }
+    const bool reserved_zero = v1 ? Load<uint32_t>(data + internal::kV1OffsetReserved0) == 0 &&
+                                        Load<uint64_t>(data + internal::kV1OffsetReserved1) == 0
+                                  : Load<uint32_t>(data + internal::kOffsetReserved) == 0;
+    if (!reserved_zero) return malformed("reserved header fields are not zero");
   }
   if (joint_count == 0 || joint_count > kMaxJointCount) {
     return malformed(StrCat("joint count ", joint_count, " is out of [1, ", kMaxJointCount, "]"));
@@ -636,11 +770,15 @@ StatusOr<LevelSetView> LevelSetDecoder::Decode(std::span<const std::byte> bytes,
     return malformed(StrCat("level count ", level_count, " is out of [1, ", kMaxLevelCount, "]"));
   }
   if (frame_count == 0) return malformed("the frame count is 0");
+  if (clip_count == 0 || clip_count > frame_count) {
+    return malformed(StrCat("clip count ", clip_count, " is out of [1, ", frame_count,
+                            "] (at most one clip per frame)"));
+  }
 
   // Directory: the known sections in canonical order, then (later minor versions only)
   // sections this build skips. Every section starts on the first 16-byte boundary
   // after its predecessor, and every byte between is zero.
-  const uint64_t known_sections = kGlobalSectionCount + uint64_t{kSectionsPerLevel} * level_count;
+  const uint64_t known_sections = global_sections + uint64_t{kSectionsPerLevel} * level_count;
   if (section_count < known_sections || (!from_later_minor && section_count != known_sections)) {
     return malformed(StrCat("section count ", section_count, " for ", level_count,
                             " levels (expected ", known_sections, ")"));
@@ -680,10 +818,10 @@ StatusOr<LevelSetView> LevelSetDecoder::Decode(std::span<const std::byte> bytes,
     if (i < known_sections) {
       SectionKind expected_kind;
       uint32_t expected_level = kNoLevel;
-      if (i < kGlobalSectionCount) {
+      if (i < global_sections) {
         expected_kind = static_cast<SectionKind>(i + 1);
       } else {
-        const uint64_t k = i - kGlobalSectionCount;
+        const uint64_t k = i - global_sections;
         expected_kind = static_cast<SectionKind>(static_cast<uint32_t>(SectionKind::kKeptJoints) +
                                                  k % kSectionsPerLevel);
         expected_level = static_cast<uint32_t>(k / kSectionsPerLevel);
@@ -733,25 +871,28 @@ StatusOr<LevelSetView> LevelSetDecoder::Decode(std::span<const std::byte> bytes,
               source.source_hash.size());
   source.settings_hash = Load<uint64_t>(data + internal::kOffsetSettingsHash);
   source.variant_name = {reinterpret_cast<const char*>(data + variant.offset), variant.size};
-  source.joint_names.reserve(n);
-  {
-    uint64_t at = 0;
-    const std::byte* p = data + names.offset;
-    for (uint64_t j = 0; j < n; ++j) {
-      if (names.size - at < 2) {
-        return malformed(StrCat("the joint names section ends inside the length of joint ", j));
-      }
-      const auto length = Load<uint16_t>(p + at);
-      at += 2;
-      if (names.size - at < length) {
-        return malformed(StrCat("the joint names section ends inside the name of joint ", j));
-      }
-      source.joint_names.emplace_back(reinterpret_cast<const char*>(p + at), length);
-      at += length;
+  std::string problem = ReadNames({data + names.offset, names.size}, n, "the joint names section",
+                                  "joint", source.joint_names);
+  if (!problem.empty()) return malformed(std::move(problem));
+  if (!v1) {
+    // The clip table: C records, then C length-prefixed names filling the rest exactly.
+    // C <= T < 2^32 and the record size < 2^32: the product does not wrap.
+    const Section& clip_table = sections[internal::kV1GlobalSectionCount];
+    const uint64_t records_bytes = uint64_t{clip_count} * clip_record_size;
+    if (clip_table.size < records_bytes + 2 * uint64_t{clip_count}) {
+      return malformed(StrCat("the clip table is ", clip_table.size, " bytes for ", clip_count,
+                              " clips (records of ", clip_record_size, " bytes, then names)"));
     }
-    if (at != names.size) {
-      return malformed(
-          StrCat("the joint names section has ", names.size - at, " bytes past the last name"));
+    std::vector<std::string_view> clip_names;
+    problem = ReadNames({data + clip_table.offset + records_bytes, clip_table.size - records_bytes},
+                        clip_count, "the clip table", "clip", clip_names);
+    if (!problem.empty()) return malformed(std::move(problem));
+    source.clips.resize(clip_count);
+    for (uint32_t c = 0; c < clip_count; ++c) {
+      const std::byte* record = data + clip_table.offset + uint64_t{c} * clip_record_size;
+      source.clips[c] = {clip_names[c], Load<uint32_t>(record + internal::kClipOffsetFirstFrame),
+                         Load<uint32_t>(record + internal::kClipOffsetFrameCount),
+                         Load<double>(record + internal::kClipOffsetFps)};
     }
   }
   // In place: the offset is a multiple of 16 and so is the buffer's address.
@@ -770,9 +911,9 @@ StatusOr<LevelSetView> LevelSetDecoder::Decode(std::span<const std::byte> bytes,
     }
     float figures[5];
     std::memcpy(figures, record + internal::kRecordOffsetFigures, sizeof figures);
-    const Section& kept = sections[kGlobalSectionCount + kSectionsPerLevel * l];
-    const Section& map = sections[kGlobalSectionCount + kSectionsPerLevel * l + 1];
-    const Section& matrices = sections[kGlobalSectionCount + kSectionsPerLevel * l + 2];
+    const Section& kept = sections[global_sections + kSectionsPerLevel * l];
+    const Section& map = sections[global_sections + kSectionsPerLevel * l + 1];
+    const Section& matrices = sections[global_sections + kSectionsPerLevel * l + 2];
     const uint64_t matrix_bytes = uint64_t{frame_count} * m * kMatrixFloats * sizeof(float);
     if (kept.size != 2 * uint64_t{m} || map.size != 2 * n || matrices.size != matrix_bytes) {
       return malformed(StrCat("level ", l, ": sections of ", kept.size, ", ", map.size, " and ",
@@ -787,11 +928,12 @@ StatusOr<LevelSetView> LevelSetDecoder::Decode(std::span<const std::byte> bytes,
     level.figures = {figures[0], figures[1], figures[2], figures[3], figures[4]};
   }
 
-  std::string problem = CheckLevelSet(source, /*allow_unknown_flags=*/from_later_minor);
+  problem = CheckLevelSet(source, /*allow_unknown_flags=*/from_later_minor);
   if (!problem.empty()) return malformed(std::move(problem));
 
   LevelSetView view;
   view.bytes_ = bytes;
+  view.major_version_ = major;
   view.minor_version_ = minor;
   view.flags_ = flags;
   view.algorithm_version_ = source.algorithm_version;
@@ -810,6 +952,12 @@ StatusOr<LevelSetView> LevelSetDecoder::Decode(std::span<const std::byte> bytes,
     level.joint_map_ = source.levels[l].joint_map;
     level.figures_ = source.levels[l].figures;
     level.matrices_ = source.levels[l].matrices;
+  }
+  ClipRef single;
+  const std::span<const ClipRef> clips = ClipsToWrite(source, single);
+  view.clips_.reserve(clips.size());
+  for (const ClipRef& clip : clips) {
+    view.clips_.push_back({clip.name, clip.first_frame, clip.frame_count, clip.fps});
   }
   return view;
 }
@@ -832,7 +980,18 @@ LevelSetRef RefOf(const LevelSetData& data) {
   for (const LevelData& level : data.levels) {
     source.levels.push_back({level.kept_joints, level.joint_map, level.figures, level.matrices});
   }
+  source.clips.reserve(data.clips.size());
+  for (const ClipInfo& clip : data.clips) {
+    source.clips.push_back({clip.name, clip.first_frame, clip.frame_count, clip.fps});
+  }
   return source;
+}
+
+int LevelSetView::FindClip(std::string_view name) const {
+  for (size_t c = 0; c < clips_.size(); ++c) {
+    if (clips_[c].name == name) return static_cast<int>(c);
+  }
+  return -1;
 }
 
 Status ValidateLevelSet(const LevelSetData& data, const PieceRunner& run) {
@@ -912,6 +1071,28 @@ StatusOr<std::string> ExtractLevel(const LevelSetView& view, uint32_t l) {
   return EncodeSource(source, WriterOptions{});
 }
 
+StatusOr<std::string> ExtractLevelClip(const LevelSetView& view, uint32_t l, uint32_t clip) {
+  if (l >= view.level_count()) {
+    return NotFound(StrCat("level ", l, " of a level set of ", view.level_count()));
+  }
+  if (clip >= view.clip_count()) {
+    return NotFound(StrCat("clip ", clip, " of a level set of ", view.clip_count()));
+  }
+  // Validated when decoded: a clip's frames lie within the level set's, and one clip of
+  // at least one frame at a finite positive fps is a valid clip table.
+  const ClipView& kept = view.clip(clip);
+  LevelSetRef source = HeaderRefOf(view);
+  source.frame_count = kept.frame_count;
+  source.fps = kept.fps;
+  source.clips = {{kept.name, 0, kept.frame_count, kept.fps}};
+  LevelRef level = RefOf(view.level(l));
+  const size_t frame_floats = level.kept_joints.size() * kMatrixFloats;
+  level.matrices =
+      level.matrices.subspan(kept.first_frame * frame_floats, kept.frame_count * frame_floats);
+  source.levels.push_back(level);
+  return EncodeSource(source, WriterOptions{});
+}
+
 LevelSetData ToLevelSetData(const LevelSetView& view) {
   LevelSetData data;
   data.variant_name = std::string(view.variant_name());
@@ -929,6 +1110,13 @@ LevelSetData ToLevelSetData(const LevelSetView& view) {
                            {level.joint_map().begin(), level.joint_map().end()},
                            level.figures(),
                            {level.matrices().begin(), level.matrices().end()}});
+  }
+  // A single unnamed clip is what empty `clips` write.
+  if (!(view.clip_count() == 1 && view.clip(0).name.empty())) {
+    data.clips.reserve(view.clip_count());
+    for (const ClipView& clip : view.clips()) {
+      data.clips.push_back({std::string(clip.name), clip.first_frame, clip.frame_count, clip.fps});
+    }
   }
   return data;
 }

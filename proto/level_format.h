@@ -4,7 +4,10 @@
 // in docs/level-format.md; this header is the API.
 //
 // Letters (as in core/types.h): j joint of the original skeleton (n of them), l level
-// (L), t frame (T), s slot of a kept joint within a level (m kept joints).
+// (L), t frame (T), s slot of a kept joint within a level (m kept joints), c clip (C).
+// A level set covers the clips (animations) of one character with one reduced skeleton
+// per level: the frames of every clip, concatenated clip after clip, are the level's T
+// frames, and the clip table says which frames are which clip.
 // K'_s(t): the skinning matrix of kept joint s at frame t. It maps a bind-pose,
 // model-space point to posed model space: p' = A p + b, stored as the top three rows of
 // the 4x4 affine [A | b], row-major, float32:
@@ -42,10 +45,13 @@ static_assert(std::numeric_limits<float>::is_iec559 && sizeof(float) == 4,
 using ::motionlod::Status;
 using ::motionlod::StatusOr;
 
-// Format version written by this build. Readers reject another major version and
-// accept any minor version of their major (see docs/level-format.md, "Versioning").
-inline constexpr uint16_t kLevelFormatMajorVersion = 1;
+// Format version written by this build. It reads every minor version of its major
+// and of major 1 (a 1.x file holds one unnamed clip of every frame); another major
+// version is refused (see docs/level-format.md, "Versioning").
+inline constexpr uint16_t kLevelFormatMajorVersion = 2;
 inline constexpr uint16_t kLevelFormatMinorVersion = 0;
+// The oldest major version this build reads.
+inline constexpr uint16_t kOldestReadableMajorVersion = 1;
 
 // LevelSetData::flags bits.
 // Every K'_s(t) is a rotation plus a translation (A orthonormal, det A = +1, checked
@@ -55,7 +61,7 @@ inline constexpr uint32_t kKnownLevelSetFlags = kLevelSetFlagRigid;
 
 inline constexpr uint32_t kMaxJointCount = 65535;  // joint indices and slots are u16
 inline constexpr uint32_t kMaxLevelCount = 65535;
-inline constexpr size_t kMaxNameBytes = 65535;  // joint and variant names, UTF-8 bytes
+inline constexpr size_t kMaxNameBytes = 65535;  // joint, clip and variant names, UTF-8 bytes
 inline constexpr size_t kMatrixFloats = 12;     // one 3x4 row-major K'_s(t)
 
 // Quality figures of one level, as the bake measured them.
@@ -87,13 +93,28 @@ struct LevelData {
   bool operator==(const LevelData&) const = default;
 };
 
+// One clip of a level set's frames: frames [first_frame, first_frame + frame_count) played
+// at fps. A bake of several animations of one character concatenates their frames, clip
+// after clip, in every level's matrices; frame t of the clip is frame first_frame + t of
+// the level set.
+struct ClipInfo {
+  std::string name;  // UTF-8, no NUL; unique; empty only for a level set's single clip
+  uint32_t first_frame = 0;
+  uint32_t frame_count = 0;  // >= 1
+  double fps = 30.0;         // finite, > 0; frame t of the clip is at time t / fps
+
+  bool operator==(const ClipInfo&) const = default;
+};
+
 // Editable plain data of a level set (what the bake tool fills in).
 struct LevelSetData {
   std::string variant_name;  // UTF-8, no NUL, may be empty
   uint32_t flags = 0;        // kLevelSetFlag* bits
   uint32_t algorithm_version = 0;
-  uint32_t frame_count = 0;  // T >= 1
-  double fps = 30.0;         // finite, > 0
+  uint32_t frame_count = 0;  // T >= 1, every clip's frames
+  // Finite, > 0; with `clips`, the first clip's (the header of a file holds the first
+  // clip's fps, so that a reader of the header alone plays clip 0 right).
+  double fps = 30.0;
   // SHA-256 of the bake inputs and the hash of the bake settings: opaque to proto,
   // carried so that a stored result can be checked against a cache key.
   std::array<uint8_t, 32> source_hash{};
@@ -103,6 +124,11 @@ struct LevelSetData {
   std::vector<std::string> joint_names;
   std::vector<int32_t> parents;
   std::vector<LevelData> levels;  // L >= 1, in the writer's order
+  // In frame order, covering [0, frame_count) without gaps (at most frame_count clips).
+  // Empty: one clip named "" of every frame at `fps`, which is what is written (every
+  // 2.0 file has a clip table) and what a 1.0 file holds; ToLevelSetData gives back an
+  // empty list for a file whose single clip is unnamed.
+  std::vector<ClipInfo> clips;
 
   bool operator==(const LevelSetData&) const = default;
 };
@@ -117,6 +143,14 @@ struct LevelRef {
   std::span<const float> matrices;
 };
 
+// ClipInfo by reference.
+struct ClipRef {
+  std::string_view name;
+  uint32_t first_frame = 0;
+  uint32_t frame_count = 0;
+  double fps = 30.0;
+};
+
 struct LevelSetRef {
   uint32_t flags = 0;
   uint32_t algorithm_version = 0;
@@ -128,6 +162,7 @@ struct LevelSetRef {
   std::vector<std::string_view> joint_names;
   std::span<const int32_t> parents;
   std::vector<LevelRef> levels;
+  std::vector<ClipRef> clips;  // as LevelSetData::clips; empty: one unnamed clip
 };
 
 // `data` by reference: valid while `data` is alive and unchanged.
@@ -160,6 +195,14 @@ StatusOr<std::string> EncodeLevelSet(const LevelSetRef& data, const PieceRunner&
 // `out` (any alignment) and returns that size. kInvalidArgument when `out` is smaller;
 // nothing is written on failure.
 StatusOr<size_t> EncodeLevelSetInto(const LevelSetData& data, std::span<std::byte> out);
+
+// One clip of a decoded level set; its name points into the decoded buffer.
+struct ClipView {
+  std::string_view name;
+  uint32_t first_frame = 0;
+  uint32_t frame_count = 0;
+  double fps = 0;
+};
 
 // One level of a decoded level set; spans into the decoded buffer.
 class LevelView {
@@ -196,6 +239,9 @@ class LevelView {
 // array and string points into the decoded buffer, which must outlive the view.
 class LevelSetView {
  public:
+  using ClipView = proto::ClipView;
+
+  uint16_t major_version() const { return major_version_; }  // as written: 1 or 2
   uint16_t minor_version() const { return minor_version_; }  // as written
   // As written: a file of a later minor version may carry bits this build ignores.
   uint32_t flags() const { return flags_; }
@@ -204,7 +250,17 @@ class LevelSetView {
   uint32_t joint_count() const { return static_cast<uint32_t>(parents_.size()); }  // n
   uint32_t level_count() const { return static_cast<uint32_t>(levels_.size()); }   // L
   uint32_t frame_count() const { return frame_count_; }                            // T
-  double fps() const { return fps_; }
+  double fps() const { return fps_; }  // the first clip's
+  // The clips, in frame order, covering [0, T): at least one (a 1.0 file, or a file
+  // written without clips: one clip named "" of every frame at fps()).
+  std::span<const ClipView> clips() const { return clips_; }
+  uint32_t clip_count() const { return static_cast<uint32_t>(clips_.size()); }
+  const ClipView& clip(uint32_t c) const {
+    assert(c < clips_.size());
+    return clips_[c];
+  }
+  // The index of the clip named `name`, or -1.
+  int FindClip(std::string_view name) const;
   const std::array<uint8_t, 32>& source_hash() const { return source_hash_; }
   uint64_t settings_hash() const { return settings_hash_; }
   std::string_view variant_name() const { return variant_name_; }
@@ -225,6 +281,7 @@ class LevelSetView {
  private:
   friend class LevelSetDecoder;
   std::span<const std::byte> bytes_;
+  uint16_t major_version_ = 0;
   uint16_t minor_version_ = 0;
   uint32_t flags_ = 0;
   uint32_t algorithm_version_ = 0;
@@ -236,6 +293,7 @@ class LevelSetView {
   std::vector<std::string_view> joint_names_;
   std::span<const int32_t> parents_;
   std::vector<LevelView> levels_;
+  std::vector<ClipView> clips_;
 };
 
 struct DecodeOptions {
@@ -248,7 +306,8 @@ struct DecodeOptions {
 // asserts on any content. Errors:
 //   kInvalidArgument  `bytes` does not start on a 16-byte boundary, or is not a level
 //                     set (magic mismatch);
-//   kUnsupported      another major version of the format;
+//   kUnsupported      a major version other than 1 and 2 (the message names the
+//                     version found and the ones this build reads);
 //   kDataLoss         truncated, corrupted (checksum) or malformed (any rule of
 //                     docs/level-format.md, "Validation"); the message says which.
 StatusOr<LevelSetView> DecodeLevelSet(std::span<const std::byte> bytes,
@@ -256,13 +315,22 @@ StatusOr<LevelSetView> DecodeLevelSet(std::span<const std::byte> bytes,
 StatusOr<LevelSetView> DecodeLevelSet(std::string_view bytes, const DecodeOptions& options = {});
 
 // Level l of `view` as a one-level file of the current version (what the server
-// streams): header, skeleton and hashes unchanged, level_count 1. Flags this build does
-// not know are dropped, and so are the unknown sections of a later minor version.
+// streams): header, skeleton, clips and hashes unchanged, level_count 1. Flags this build
+// does not know are dropped, and so are the unknown sections of a later minor version.
 // kNotFound when l >= view.level_count().
 StatusOr<std::string> ExtractLevel(const LevelSetView& view, uint32_t l);
 
+// Level l of `view`, frames of clip `clip` only, as a one-level, one-clip file of the
+// current version: the clip keeps its name and fps and starts at frame 0; the file's
+// frame_count and fps are the clip's; the level's figures are kept as written (the
+// bake's, over every clip). kNotFound when l >= view.level_count() or
+// clip >= view.clip_count().
+StatusOr<std::string> ExtractLevelClip(const LevelSetView& view, uint32_t l, uint32_t clip);
+
 // A copy of `view` as editable data (flags this build does not know dropped), so that
-// EncodeLevelSet(ToLevelSetData(view)) reproduces a current-version file byte for byte.
+// EncodeLevelSet(ToLevelSetData(view)) reproduces a current-version file byte for byte
+// (a 1.x file comes out as the 2.0 one of the same content). A single unnamed clip comes
+// back as empty `clips`.
 LevelSetData ToLevelSetData(const LevelSetView& view);
 
 }  // namespace motionlod::proto

@@ -15,7 +15,7 @@ namespace motionlod::proto::internal {
 inline constexpr char kMagic[8] = {'M', 'L', 'O', 'D', 'L', 'V', 'L', 'S'};
 inline constexpr char kTrailerMagic[8] = {'M', 'L', 'O', 'D', '_', 'E', 'N', 'D'};
 
-// File header (version 1.0: 112 bytes); byte offsets of its fields.
+// File header (versions 1.0 and 2.0: 112 bytes); byte offsets of its fields.
 inline constexpr uint32_t kHeaderSize = 112;
 inline constexpr size_t kOffsetMagic = 0;              // char[8]
 inline constexpr size_t kOffsetMajorVersion = 8;       // u16
@@ -32,18 +32,29 @@ inline constexpr size_t kOffsetFps = 48;               // f64
 inline constexpr size_t kOffsetSettingsHash = 56;      // u64
 inline constexpr size_t kOffsetSourceHash = 64;        // u8[32]
 inline constexpr size_t kOffsetLevelRecordSize = 96;   // u32
-inline constexpr size_t kOffsetReserved0 = 100;        // u32, 0
-inline constexpr size_t kOffsetReserved1 = 104;        // u64, 0
+inline constexpr size_t kOffsetClipCount = 100;        // u32 C (2.x)
+inline constexpr size_t kOffsetClipRecordSize = 104;   // u32 (2.x)
+inline constexpr size_t kOffsetReserved = 108;         // u32, 0 (2.x)
+// Version 1.x: offsets 100 (u32) and 104 (u64) are reserved, 0.
+inline constexpr size_t kV1OffsetReserved0 = 100;  // u32, 0
+inline constexpr size_t kV1OffsetReserved1 = 104;  // u64, 0
 
 // Section directory entry: kind u32, level u32, offset u64, size u64.
 inline constexpr uint32_t kDirectoryEntrySize = 24;
 inline constexpr uint32_t kNoLevel = 0xFFFFFFFFu;  // `level` of a global section
 
-// Level record (version 1.0: 32 bytes), one per level in the level table.
+// Level record (versions 1.0 and 2.0: 32 bytes), one per level in the level table.
 inline constexpr uint32_t kLevelRecordSize = 32;
 inline constexpr size_t kRecordOffsetKeptCount = 0;  // u32 m
 inline constexpr size_t kRecordOffsetFigures = 4;    // f32[5], LevelFigures order
 inline constexpr size_t kRecordOffsetReserved = 24;  // u32[2], 0
+
+// Clip record (version 2.0: 16 bytes), C of them at the start of the clip table; the C
+// length-prefixed names (u16 byte length, UTF-8 bytes) follow the last record.
+inline constexpr uint32_t kClipRecordSize = 16;
+inline constexpr size_t kClipOffsetFirstFrame = 0;  // u32
+inline constexpr size_t kClipOffsetFrameCount = 4;  // u32
+inline constexpr size_t kClipOffsetFps = 8;         // f64
 
 // Trailer: char[8] kTrailerMagic, then u64 XXH64 (seed 0) of every preceding byte.
 inline constexpr uint32_t kTrailerSize = 16;
@@ -53,11 +64,13 @@ enum class SectionKind : uint32_t {
   kJointNames = 2,    // global: n x (u16 byte length, UTF-8 bytes)
   kJointParents = 3,  // global: n x i32
   kLevelTable = 4,    // global: L x level record
+  kClipTable = 5,     // global (2.x): C x clip record, then C x (u16 byte length, UTF-8)
   kKeptJoints = 16,   // per level: m x u16
   kJointMap = 17,     // per level: n x u16
   kMatrices = 18,     // per level: T x m x 12 x f32
 };
-inline constexpr uint32_t kGlobalSectionCount = 4;
+inline constexpr uint32_t kGlobalSectionCount = 5;    // 2.x: kinds 1 to 5, in kind order
+inline constexpr uint32_t kV1GlobalSectionCount = 4;  // 1.x: kinds 1 to 4
 inline constexpr uint32_t kSectionsPerLevel = 3;
 
 // A section a writer of a later minor version might append.
@@ -74,9 +87,10 @@ struct WriterOptions {
   uint16_t minor_version = kLevelFormatMinorVersion;
   uint32_t header_size = kHeaderSize;             // multiple of 16, >= kHeaderSize
   uint32_t level_record_size = kLevelRecordSize;  // multiple of 4, >= kLevelRecordSize
-  uint8_t extension_fill = 0;                     // bytes past the known header / record
-  uint32_t extra_flags = 0;                       // or-ed into the flags, unvalidated
-  std::vector<ExtraSection> extra_sections;       // appended after the known sections
+  uint32_t clip_record_size = kClipRecordSize;    // multiple of 8, >= kClipRecordSize
+  uint8_t extension_fill = 0;                // bytes past the known header, level and clip records
+  uint32_t extra_flags = 0;                  // or-ed into the flags, unvalidated
+  std::vector<ExtraSection> extra_sections;  // appended after the known sections
 };
 
 // Validates `data` (as ValidateLevelSet, on `run`) and writes it as `options` say.

@@ -1,6 +1,7 @@
 // libFuzzer target for the level-set decoder: any input must decode or fail with a
 // Status, never crash, over-read or trip a sanitizer; what decodes must re-encode to
-// the same bytes and extract to files that decode again.
+// the same bytes and extract (by level, and by level and clip) to files that decode again.
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <cstdlib>
@@ -34,10 +35,21 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       Check(level.joint_map()[j] < level.kept_count());
   }
   (void)sum;
+  // The clips, one at least (a 1.x file: one unnamed clip), cover the frames in order.
+  Check(view->clip_count() >= 1);
+  uint64_t next_frame = 0;
+  for (const ClipView& clip : view->clips()) {
+    Check(clip.first_frame == next_frame && clip.frame_count >= 1);
+    Check(clip.name.empty() || clip.name.size() <= kMaxNameBytes);
+    Check(view->FindClip(clip.name) == static_cast<int>(&clip - view->clips().data()));
+    next_frame += clip.frame_count;
+  }
+  Check(next_frame == view->frame_count());
 
   const auto reencoded = EncodeLevelSet(ToLevelSetData(*view));
   Check(reencoded.ok());
-  if (view->minor_version() == kLevelFormatMinorVersion) {
+  if (view->major_version() == kLevelFormatMajorVersion &&
+      view->minor_version() == kLevelFormatMinorVersion) {
     // A current-version file is canonical apart from its checksum field.
     Check(reencoded->size() == size);
     Check(
@@ -48,6 +60,14 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     Check(extracted.ok());
     const AlignedBytes copy = AlignedBytes::CopyOf(*extracted);
     Check(DecodeLevelSet(copy.bytes()).ok());
+    for (uint32_t c = 0; c < view->clip_count(); ++c) {
+      const auto clip = ExtractLevelClip(*view, l, c);
+      Check(clip.ok());
+      const AlignedBytes clip_copy = AlignedBytes::CopyOf(*clip);
+      const auto single = DecodeLevelSet(clip_copy.bytes());
+      Check(single.ok() && single->clip_count() == 1 &&
+            single->frame_count() == view->clip(c).frame_count);
+    }
   }
   return 0;
 }

@@ -13,6 +13,7 @@
 #include "proto/aligned_bytes.h"
 #include "proto/checksum.h"
 #include "proto/level_format_internal.h"
+#include "tests/proto/level_format_v1.h"
 
 namespace motionlod::proto {
 namespace {
@@ -85,6 +86,14 @@ LevelSetData MakeRigidSample(uint32_t frames = 2) {
       }
     }
   }
+  return data;
+}
+
+// The sample as a character-wide level set: three clips over its six frames, the level
+// set's fps the first clip's.
+LevelSetData MakeClipSample() {
+  LevelSetData data = MakeSample(6);
+  data.clips = {{"walk", 0, 3, 29.97}, {"jump", 3, 2, 60.0}, {"idle \xC3\xA9", 5, 1, 24.0}};
   return data;
 }
 
@@ -547,19 +556,28 @@ TEST(DecodeLevelSet, RejectsBadMagic) {
   EXPECT_THAT(status.message(), HasSubstr("magic"));
 }
 
-TEST(DecodeLevelSet, RejectsUnknownMajorVersion) {
+TEST(DecodeLevelSet, RefusesOtherMajorVersionsNamingTheVersionFoundAndTheOnesItReads) {
   internal::WriterOptions options;
-  options.major_version = 2;
+  options.major_version = 3;
+  options.minor_version = 1;
   const LevelSetData sample = MakeSample();
   const AlignedBytes bytes =
       AlignedBytes::CopyOf(internal::EncodeLevelSetWithOptions(RefOf(sample), options).value());
   const Status status = DecodeLevelSet(bytes.bytes()).status();
   EXPECT_EQ(status.code(), StatusCode::kUnsupported);
-  EXPECT_THAT(status.message(), HasSubstr("version 2.0"));
+  EXPECT_THAT(status.message(), HasSubstr("version 3.1 is not supported"));
+  EXPECT_THAT(status.message(), HasSubstr("reads versions 1.x and 2.x"));
 
-  const Status zero = DecodeEdited(
-      bytes, [](AlignedBytes& b) { Poke<uint16_t>(b, internal::kOffsetMajorVersion, 0); });
-  EXPECT_EQ(zero.code(), StatusCode::kUnsupported);
+  for (const uint16_t major : {uint16_t{0}, uint16_t{4}, uint16_t{0xFFFF}}) {
+    const Status other = DecodeEdited(
+        bytes, [&](AlignedBytes& b) { Poke<uint16_t>(b, internal::kOffsetMajorVersion, major); });
+    EXPECT_EQ(other.code(), StatusCode::kUnsupported) << major;
+    EXPECT_THAT(other.message(), HasSubstr("version " + std::to_string(major) + ".1")) << major;
+  }
+  // Refused before the checksum is looked at: a reader of another major cannot know it.
+  AlignedBytes unsealed = AlignedBytes::CopyOf(bytes.bytes());
+  Poke<uint16_t>(unsealed, internal::kOffsetMajorVersion, 0);
+  EXPECT_EQ(DecodeLevelSet(unsealed.bytes()).status().code(), StatusCode::kUnsupported);
 }
 
 TEST(DecodeLevelSet, RejectsTruncationAtEveryByteOffset) {
@@ -599,20 +617,30 @@ TEST(DecodeLevelSet, ReportsChecksumMismatchAsDataLoss) {
 }
 
 TEST(DecodeLevelSet, WithoutChecksumNeverFailsOtherThanByStatusOnCorruptBytes) {
-  // The fuzz target's configuration, on every single-byte corruption of a small file:
-  // each decodes or fails cleanly (run under sanitizers to catch over-reads).
-  const AlignedBytes original = Encode(MakeSample(1));
-  AlignedBytes bytes = AlignedBytes::CopyOf(original.bytes());
-  const DecodeOptions no_checksum{.verify_checksum = false};
-  for (size_t i = 0; i < bytes.size(); ++i) {
-    for (const uint8_t value : {0x00, 0x01, 0x7F, 0x80, 0xFF}) {
-      const std::byte saved = bytes.data()[i];
-      bytes.data()[i] = std::byte{value};
-      StatusOr<LevelSetView> view = DecodeLevelSet(bytes.bytes(), no_checksum);
-      if (view.ok()) {
-        EXPECT_TRUE(EncodeLevelSet(ToLevelSetData(*view)).ok()) << "byte " << i;
+  // The fuzz target's configuration, on every single-byte corruption of small files (of
+  // both versions, one with several clips): each decodes or fails cleanly (run under
+  // sanitizers to catch over-reads).
+  LevelSetData clips = MakeClipSample();
+  clips.levels.resize(1);
+  for (const std::string& file :
+       {EncodeLevelSet(MakeSample(1)).value(), EncodeLevelSet(clips).value(),
+        test_v1::EncodeVersion1(MakeSample(1))}) {
+    AlignedBytes bytes = AlignedBytes::CopyOf(file);
+    const DecodeOptions no_checksum{.verify_checksum = false};
+    ASSERT_TRUE(DecodeLevelSet(bytes.bytes(), no_checksum).ok());
+    for (size_t i = 0; i < bytes.size(); ++i) {
+      for (const uint8_t value : {0x00, 0x01, 0x7F, 0x80, 0xFF}) {
+        const std::byte saved = bytes.data()[i];
+        bytes.data()[i] = std::byte{value};
+        StatusOr<LevelSetView> view = DecodeLevelSet(bytes.bytes(), no_checksum);
+        if (view.ok()) {
+          EXPECT_TRUE(EncodeLevelSet(ToLevelSetData(*view)).ok()) << "byte " << i;
+          for (uint32_t c = 0; c < view->clip_count(); ++c) {
+            EXPECT_TRUE(ExtractLevelClip(*view, 0, c).ok()) << "byte " << i << " clip " << c;
+          }
+        }
+        bytes.data()[i] = saved;
       }
-      bytes.data()[i] = saved;
     }
   }
 }
@@ -791,8 +819,8 @@ TEST(DecodeLevelSet, RejectsNonZeroPadding) {
 
 TEST(DecodeLevelSet, RejectsReservedFieldsAndUnknownFlagsOfTheCurrentMinorVersion) {
   const AlignedBytes bytes = Encode(MakeSample());
-  const Status reserved = DecodeEdited(
-      bytes, [](AlignedBytes& b) { Poke<uint32_t>(b, internal::kOffsetReserved0, 1); });
+  const Status reserved =
+      DecodeEdited(bytes, [](AlignedBytes& b) { Poke<uint32_t>(b, internal::kOffsetReserved, 1); });
   EXPECT_THAT(reserved.message(), HasSubstr("reserved"));
   const Status flags = DecodeEdited(
       bytes, [](AlignedBytes& b) { Poke<uint32_t>(b, internal::kOffsetFlags, 1u << 5); });
@@ -818,17 +846,20 @@ TEST(DecodeLevelSet, AcceptsLaterMinorVersionAndSkipsWhatItDoesNotKnow) {
   later.minor_version = kLevelFormatMinorVersion + 3;
   later.header_size = internal::kHeaderSize + 32;
   later.level_record_size = internal::kLevelRecordSize + 12;
+  later.clip_record_size = internal::kClipRecordSize + 8;
   later.extension_fill = 0xA5;
   later.extra_flags = 1u << 12;
   later.extra_sections.push_back({40, internal::kNoLevel, "a global section of the future"});
   later.extra_sections.push_back({41, 1, std::string(37, '\x5A')});
-  const LevelSetData data = MakeSample();
+  const LevelSetData data = MakeClipSample();
   const AlignedBytes bytes =
       AlignedBytes::CopyOf(internal::EncodeLevelSetWithOptions(RefOf(data), later).value());
 
   StatusOr<LevelSetView> view = DecodeLevelSet(bytes.bytes());
   ASSERT_TRUE(view.ok()) << view.status().ToString();
   EXPECT_EQ(view->minor_version(), kLevelFormatMinorVersion + 3);
+  EXPECT_EQ(view->clip(2).name, data.clips[2].name);
+  EXPECT_EQ(view->clip(1).fps, 60.0);
   EXPECT_EQ(view->flags(), 1u << 12);
   EXPECT_EQ(ToLevelSetData(*view), data);  // unknown flags dropped
 
@@ -839,6 +870,399 @@ TEST(DecodeLevelSet, AcceptsLaterMinorVersionAndSkipsWhatItDoesNotKnow) {
   EXPECT_EQ(single->minor_version(), kLevelFormatMinorVersion);
   EXPECT_EQ(single->flags(), 0u);
   EXPECT_EQ(ToLevelSetData(*single).levels[0], data.levels[2]);
+}
+
+// ---------------------------------------------------------------------------------
+// Clips (version 2.0).
+
+// Where the clip table starts: directory entry 4.
+size_t ClipTableOffset(const AlignedBytes& bytes) {
+  uint64_t offset;
+  std::memcpy(&offset, bytes.data() + internal::kHeaderSize + 4 * internal::kDirectoryEntrySize + 8,
+              8);
+  return static_cast<size_t>(offset);
+}
+
+template <typename T>
+T Peek(const AlignedBytes& bytes, size_t offset) {
+  T value;
+  std::memcpy(&value, bytes.data() + offset, sizeof value);
+  return value;
+}
+
+TEST(Clips, RoundTripReproducesEveryClip) {
+  const LevelSetData data = MakeClipSample();
+  const AlignedBytes bytes = Encode(data);
+  StatusOr<LevelSetView> view = DecodeLevelSet(bytes.bytes());
+  ASSERT_TRUE(view.ok()) << view.status().ToString();
+  EXPECT_EQ(view->major_version(), 2);
+  ASSERT_EQ(view->clip_count(), 3u);
+  ASSERT_EQ(view->clips().size(), 3u);
+  EXPECT_EQ(view->clip(0).name, "walk");
+  EXPECT_EQ(view->clip(1).name, "jump");
+  EXPECT_EQ(view->clip(2).name, "idle \xC3\xA9");
+  EXPECT_EQ(view->clip(1).first_frame, 3u);
+  EXPECT_EQ(view->clip(1).frame_count, 2u);
+  EXPECT_EQ(view->clip(1).fps, 60.0);
+  EXPECT_EQ(view->clip(2).first_frame, 5u);
+  EXPECT_EQ(view->clip(2).fps, 24.0);
+  EXPECT_EQ(view->fps(), view->clip(0).fps);
+  EXPECT_EQ(view->FindClip("jump"), 1);
+  EXPECT_EQ(view->FindClip("idle \xC3\xA9"), 2);
+  EXPECT_EQ(view->FindClip("run"), -1);
+  EXPECT_EQ(view->FindClip(""), -1);
+  // The names are views into the buffer.
+  const auto* name = reinterpret_cast<const std::byte*>(view->clip(2).name.data());
+  EXPECT_TRUE(name >= bytes.data() && name < bytes.data() + bytes.size());
+  EXPECT_EQ(ToLevelSetData(*view), data);
+}
+
+TEST(Clips, ReencodingADecodedFileReproducesItByteForByte) {
+  const AlignedBytes bytes = Encode(MakeClipSample());
+  const LevelSetView view = DecodeLevelSet(bytes.bytes()).value();
+  const std::string again = EncodeLevelSet(ToLevelSetData(view)).value();
+  ASSERT_EQ(again.size(), bytes.size());
+  EXPECT_EQ(std::memcmp(again.data(), bytes.data(), bytes.size()), 0);
+  EXPECT_EQ(EncodedLevelSetSize(MakeClipSample()), bytes.size());
+}
+
+TEST(Clips, WithoutClipsTheFileHoldsOneUnnamedClipOfEveryFrame) {
+  const LevelSetData data = MakeSample();
+  const AlignedBytes bytes = Encode(data);
+  const LevelSetView view = DecodeLevelSet(bytes.bytes()).value();
+  ASSERT_EQ(view.clip_count(), 1u);
+  EXPECT_EQ(view.clip(0).name, "");
+  EXPECT_EQ(view.clip(0).first_frame, 0u);
+  EXPECT_EQ(view.clip(0).frame_count, data.frame_count);
+  EXPECT_EQ(view.clip(0).fps, data.fps);
+  EXPECT_EQ(view.FindClip(""), 0);
+  EXPECT_EQ(Peek<uint32_t>(bytes, internal::kOffsetClipCount), 1u);
+  // ... which reads back as no clips, and is also what that one clip, spelled out, writes.
+  EXPECT_TRUE(ToLevelSetData(view).clips.empty());
+  LevelSetData explicit_clip = data;
+  explicit_clip.clips = {{"", 0, data.frame_count, data.fps}};
+  const std::string spelled_out = EncodeLevelSet(explicit_clip).value();
+  ASSERT_EQ(spelled_out.size(), bytes.size());
+  EXPECT_EQ(std::memcmp(spelled_out.data(), bytes.data(), bytes.size()), 0);
+}
+
+TEST(Clips, OneNamedClipRoundTrips) {
+  LevelSetData data = MakeSample();
+  data.clips = {{"walk", 0, data.frame_count, data.fps}};
+  const AlignedBytes bytes = Encode(data);
+  const LevelSetView view = DecodeLevelSet(bytes.bytes()).value();
+  EXPECT_EQ(view.clip(0).name, "walk");
+  EXPECT_EQ(ToLevelSetData(view), data);
+}
+
+TEST(Clips, OneClipPerFrameIsAllowed) {
+  LevelSetData data = MakeSample(4);
+  for (uint32_t t = 0; t < 4; ++t) {
+    data.clips.push_back({"pose " + std::to_string(t), t, 1, t == 0 ? data.fps : 10.0 + t});
+  }
+  const AlignedBytes bytes = Encode(data);
+  EXPECT_EQ(ToLevelSetData(DecodeLevelSet(bytes.bytes()).value()), data);
+}
+
+// The clip table as docs/level-format.md lays it out, byte by byte.
+TEST(Clips, TableLayoutIsAsDocumented) {
+  const AlignedBytes bytes = Encode(MakeClipSample());
+  EXPECT_EQ(Peek<uint16_t>(bytes, internal::kOffsetMajorVersion), 2);
+  EXPECT_EQ(Peek<uint16_t>(bytes, internal::kOffsetMinorVersion), 0);
+  EXPECT_EQ(Peek<uint32_t>(bytes, 100), 3u);   // clip_count
+  EXPECT_EQ(Peek<uint32_t>(bytes, 104), 16u);  // clip_record_size
+  EXPECT_EQ(Peek<uint32_t>(bytes, 108), 0u);   // reserved
+  EXPECT_EQ(Peek<uint32_t>(bytes, internal::kOffsetSectionCount), 5u + 3u * 3u);
+  EXPECT_EQ(Peek<double>(bytes, internal::kOffsetFps), 29.97);
+  const size_t entry = internal::kHeaderSize + 4 * internal::kDirectoryEntrySize;
+  EXPECT_EQ(Peek<uint32_t>(bytes, entry), 5u);  // kind: clip table
+  EXPECT_EQ(Peek<uint32_t>(bytes, entry + 4), 0xFFFFFFFFu);
+  const size_t names_bytes = (2 + 4) + (2 + 4) + (2 + 7);
+  EXPECT_EQ(Peek<uint64_t>(bytes, entry + 16), 3 * 16 + names_bytes);
+  EXPECT_EQ(Peek<uint32_t>(bytes, entry + 24), 16u);  // entry 5: level 0's kept joints
+  EXPECT_EQ(Peek<uint32_t>(bytes, entry + 28), 0u);
+  const size_t table = ClipTableOffset(bytes);
+  EXPECT_EQ(table % 16, 0u);
+  const uint32_t expected[3][2] = {{0, 3}, {3, 2}, {5, 1}};
+  const double fps[3] = {29.97, 60.0, 24.0};
+  for (size_t c = 0; c < 3; ++c) {
+    EXPECT_EQ(Peek<uint32_t>(bytes, table + 16 * c), expected[c][0]) << c;
+    EXPECT_EQ(Peek<uint32_t>(bytes, table + 16 * c + 4), expected[c][1]) << c;
+    EXPECT_EQ(Peek<double>(bytes, table + 16 * c + 8), fps[c]) << c;
+  }
+  const std::string names(reinterpret_cast<const char*>(bytes.data() + table + 48), names_bytes);
+  EXPECT_EQ(names, std::string("\x04\x00walk\x04\x00jump\x07\x00idle \xC3\xA9", names_bytes));
+}
+
+TEST(Clips, ExtractLevelKeepsEveryClip) {
+  const LevelSetData data = MakeClipSample();
+  const AlignedBytes bytes = Encode(data);
+  const LevelSetView view = DecodeLevelSet(bytes.bytes()).value();
+  const AlignedBytes one = AlignedBytes::CopyOf(ExtractLevel(view, 1).value());
+  LevelSetData expected = data;
+  expected.levels = {data.levels[1]};
+  EXPECT_EQ(ToLevelSetData(DecodeLevelSet(one.bytes()).value()), expected);
+}
+
+TEST(ExtractLevelClip, HoldsTheMatricesOfTheClipsFramesOnly) {
+  const LevelSetData data = MakeClipSample();
+  const AlignedBytes bytes = Encode(data);
+  const LevelSetView view = DecodeLevelSet(bytes.bytes()).value();
+  for (uint32_t l = 0; l < view.level_count(); ++l) {
+    for (uint32_t c = 0; c < view.clip_count(); ++c) {
+      StatusOr<std::string> extracted = ExtractLevelClip(view, l, c);
+      ASSERT_TRUE(extracted.ok()) << extracted.status().ToString();
+      const AlignedBytes file = AlignedBytes::CopyOf(*extracted);
+      StatusOr<LevelSetView> single = DecodeLevelSet(file.bytes());
+      ASSERT_TRUE(single.ok()) << single.status().ToString();
+      const ClipInfo& clip = data.clips[c];
+      ASSERT_EQ(single->level_count(), 1u);
+      ASSERT_EQ(single->clip_count(), 1u);
+      EXPECT_EQ(single->clip(0).name, clip.name);
+      EXPECT_EQ(single->clip(0).first_frame, 0u);
+      EXPECT_EQ(single->clip(0).frame_count, clip.frame_count);
+      EXPECT_EQ(single->clip(0).fps, clip.fps);
+      EXPECT_EQ(single->frame_count(), clip.frame_count);
+      EXPECT_EQ(single->fps(), clip.fps);
+      EXPECT_EQ(single->variant_name(), data.variant_name);
+      EXPECT_EQ(single->source_hash(), data.source_hash);
+      const LevelView& level = single->level(0);
+      EXPECT_EQ(level.figures(), data.levels[l].figures);
+      EXPECT_TRUE(std::equal(level.kept_joints().begin(), level.kept_joints().end(),
+                             data.levels[l].kept_joints.begin(), data.levels[l].kept_joints.end()));
+      // Frame t of the file is frame first_frame + t of the level set.
+      for (uint32_t t = 0; t < clip.frame_count; ++t) {
+        for (uint32_t s = 0; s < level.kept_count(); ++s) {
+          for (size_t k = 0; k < kMatrixFloats; ++k) {
+            ASSERT_EQ(level.matrix(t, s)[k], SampleValue(l, clip.first_frame + t, s, k))
+                << "level " << l << " clip " << c << " frame " << t;
+          }
+        }
+      }
+      // A one-clip file's clip is the file.
+      const std::string again = ExtractLevelClip(*single, 0, 0).value();
+      ASSERT_EQ(again.size(), file.size());
+      EXPECT_EQ(std::memcmp(again.data(), file.data(), file.size()), 0);
+    }
+  }
+}
+
+TEST(ExtractLevelClip, OfTheSingleUnnamedClipIsExtractLevel) {
+  const AlignedBytes bytes = Encode(MakeSample());
+  const LevelSetView view = DecodeLevelSet(bytes.bytes()).value();
+  EXPECT_EQ(ExtractLevelClip(view, 2, 0).value(), ExtractLevel(view, 2).value());
+}
+
+TEST(ExtractLevelClip, RejectsLevelOrClipOutOfRange) {
+  const AlignedBytes bytes = Encode(MakeClipSample());
+  const LevelSetView view = DecodeLevelSet(bytes.bytes()).value();
+  const Status level = ExtractLevelClip(view, 3, 0).status();
+  EXPECT_EQ(level.code(), StatusCode::kNotFound);
+  EXPECT_THAT(level.message(), HasSubstr("level 3"));
+  const Status clip = ExtractLevelClip(view, 0, 3).status();
+  EXPECT_EQ(clip.code(), StatusCode::kNotFound);
+  EXPECT_THAT(clip.message(), HasSubstr("clip 3"));
+}
+
+TEST(ValidateLevelSet, AcceptsTheClipSample) {
+  EXPECT_TRUE(ValidateLevelSet(MakeClipSample()).ok());
+}
+
+TEST(ValidateLevelSet, RejectsEachInvalidClip) {
+  const InvalidCase cases[] = {
+      {"more clips than frames",
+       [](LevelSetData& d) {
+         d.clips.clear();
+         for (uint32_t c = 0; c < 7; ++c) d.clips.push_back({std::to_string(c), c, 1, d.fps});
+       },
+       "7 clips for 6 frames"},
+      {"gap", [](LevelSetData& d) { d.clips[1].first_frame = 4; },
+       "clip 1 (\"jump\") starts at frame 4; clips must be contiguous and in frame order "
+       "(expected frame 3)"},
+      {"overlap", [](LevelSetData& d) { d.clips[1].first_frame = 2; },
+       "clip 1 (\"jump\") starts at frame 2"},
+      {"out of frame order", [](LevelSetData& d) { std::swap(d.clips[0], d.clips[1]); },
+       "clip 0 (\"jump\") starts at frame 3"},
+      {"no frame", [](LevelSetData& d) { d.clips[2].frame_count = 0; },
+       "clip 2 (\"idle \xC3\xA9\") has no frame"},
+      {"past the end", [](LevelSetData& d) { d.clips[2].frame_count = 2; },
+       "clip 2 (\"idle \xC3\xA9\") ends at frame 7, past the 6 frames"},
+      {"frame count that would wrap", [](LevelSetData& d) { d.clips[1].frame_count = 0xFFFFFFFFu; },
+       "clip 1 (\"jump\") ends at frame 4294967298"},
+      {"frames left uncovered", [](LevelSetData& d) { d.clips.pop_back(); },
+       "the clips cover frames [0, 5) of 6"},
+      {"fps zero", [](LevelSetData& d) { d.clips[1].fps = 0; }, "clip 1 (\"jump\"): fps is 0"},
+      {"fps negative", [](LevelSetData& d) { d.clips[2].fps = -24; }, "clip 2"},
+      {"fps NaN", [](LevelSetData& d) { d.clips[1].fps = std::nan(""); }, "clip 1 (\"jump\"): fps"},
+      {"fps infinite",
+       [](LevelSetData& d) { d.clips[1].fps = std::numeric_limits<double>::infinity(); },
+       "clip 1 (\"jump\"): fps is inf"},
+      {"level set fps not the first clip's", [](LevelSetData& d) { d.fps = 30; },
+       "a level set's fps is its first clip's"},
+      {"name not UTF-8", [](LevelSetData& d) { d.clips[1].name = "ju\xFFmp"; },
+       "the name of clip 1 is not valid UTF-8"},
+      {"name with NUL", [](LevelSetData& d) { d.clips[2].name = std::string("a\0b", 3); },
+       "the name of clip 2 contains a NUL byte"},
+      {"long name", [](LevelSetData& d) { d.clips[0].name = std::string(70000, 'a'); },
+       "the name of clip 0 is 70000 bytes long"},
+      {"unnamed among several", [](LevelSetData& d) { d.clips[1].name.clear(); },
+       "the name of clip 1 is empty (only a level set's single clip may be unnamed)"},
+      {"duplicate name", [](LevelSetData& d) { d.clips[2].name = "walk"; },
+       "two clips are named \"walk\""},
+  };
+  for (const InvalidCase& c : cases) {
+    LevelSetData data = MakeClipSample();
+    c.edit(data);
+    const Status status = ValidateLevelSet(data);
+    EXPECT_EQ(status.code(), StatusCode::kInvalidArgument) << c.name;
+    EXPECT_THAT(status.message(), HasSubstr(c.message)) << c.name;
+    EXPECT_EQ(EncodeLevelSet(data).status().message(), status.message()) << c.name;
+    EXPECT_EQ(EncodeLevelSet(RefOf(data)).status().message(), status.message()) << c.name;
+  }
+}
+
+TEST(ValidateLevelSet, ChecksOneClipLikeSeveral) {
+  LevelSetData data = MakeSample();
+  data.clips = {{"", 0, data.frame_count - 1, data.fps}};
+  EXPECT_THAT(ValidateLevelSet(data).message(), HasSubstr("the clips cover frames [0, 2) of 3"));
+  data.clips = {{"", 0, data.frame_count, 25.0}};
+  EXPECT_THAT(ValidateLevelSet(data).message(), HasSubstr("first clip's"));
+}
+
+TEST(DecodeLevelSet, RejectsInvalidClipTables) {
+  const AlignedBytes bytes = Encode(MakeClipSample());
+  const size_t table = ClipTableOffset(bytes);
+  const size_t names = table + 3 * 16;
+  struct Case {
+    const char* name;
+    std::function<void(AlignedBytes&)> edit;
+    const char* message;
+  };
+  const Case cases[] = {
+      {"gap", [&](AlignedBytes& b) { Poke<uint32_t>(b, table + 16 + 0, 4); },
+       "clip 1 (\"jump\") starts at frame 4"},
+      {"no frame", [&](AlignedBytes& b) { Poke<uint32_t>(b, table + 32 + 4, 0); }, "has no frame"},
+      {"past the end", [&](AlignedBytes& b) { Poke<uint32_t>(b, table + 32 + 4, 2); },
+       "ends at frame 7"},
+      {"fps NaN",
+       [&](AlignedBytes& b) {
+         Poke<double>(b, table + 16 + 8, std::numeric_limits<double>::quiet_NaN());
+       },
+       "clip 1 (\"jump\"): fps"},
+      {"header fps not the first clip's",
+       [&](AlignedBytes& b) { Poke<double>(b, table + 8, 30.0); },
+       "a level set's fps is its first clip's"},
+      {"name not UTF-8", [&](AlignedBytes& b) { Poke<uint8_t>(b, names + 2, 0xFF); },
+       "the name of clip 0 is not valid UTF-8"},
+      {"name with NUL", [&](AlignedBytes& b) { Poke<uint8_t>(b, names + 6 + 2 + 1, 0); },
+       "the name of clip 1 contains a NUL byte"},
+      {"duplicate name", [&](AlignedBytes& b) { std::memcpy(b.data() + names + 6 + 2, "walk", 4); },
+       "two clips are named \"walk\""},
+      {"name past the table", [&](AlignedBytes& b) { Poke<uint16_t>(b, names + 12, 0xFFFF); },
+       "the clip table ends inside the name of clip 2"},
+      {"no clip", [](AlignedBytes& b) { Poke<uint32_t>(b, internal::kOffsetClipCount, 0); },
+       "clip count 0 is out of [1, 6]"},
+      {"more clips than frames",
+       [](AlignedBytes& b) { Poke<uint32_t>(b, internal::kOffsetClipCount, 7); },
+       "clip count 7 is out of [1, 6]"},
+      {"huge clip count",
+       [](AlignedBytes& b) { Poke<uint32_t>(b, internal::kOffsetClipCount, 0xFFFFFFFFu); },
+       "clip count 4294967295"},
+      {"clip record size of a later minor version",
+       [](AlignedBytes& b) { Poke<uint32_t>(b, internal::kOffsetClipRecordSize, 24); },
+       "clip record size 24 is invalid for version 2.0"},
+      {"clip record size that would wrap",
+       [](AlignedBytes& b) {
+         Poke<uint16_t>(b, internal::kOffsetMinorVersion, 1);
+         Poke<uint32_t>(b, internal::kOffsetClipRecordSize, 0xFFFFFFF8u);
+       },
+       "the clip table is"},
+      {"clip table kind",
+       [](AlignedBytes& b) {
+         Poke<uint32_t>(b, internal::kHeaderSize + 4 * internal::kDirectoryEntrySize, 6);
+       },
+       "section 4 is of kind 6"},
+  };
+  for (const Case& c : cases) {
+    const Status status = DecodeEdited(bytes, c.edit);
+    EXPECT_EQ(status.code(), StatusCode::kDataLoss) << c.name;
+    EXPECT_THAT(status.message(), HasSubstr(c.message)) << c.name;
+  }
+  // Fewer clips than the table holds: the names do not fill it.
+  const Status fewer = DecodeEdited(
+      bytes, [](AlignedBytes& b) { Poke<uint32_t>(b, internal::kOffsetClipCount, 2); });
+  EXPECT_EQ(fewer.code(), StatusCode::kDataLoss);
+}
+
+// ---------------------------------------------------------------------------------
+// Version 1.0 files (no clip table) still read, as one unnamed clip of every frame.
+
+TEST(Version1, DecodesAsOneUnnamedClipOfEveryFrame) {
+  const LevelSetData data = MakeSample();
+  const AlignedBytes bytes = AlignedBytes::CopyOf(test_v1::EncodeVersion1(data));
+  StatusOr<LevelSetView> view = DecodeLevelSet(bytes.bytes());
+  ASSERT_TRUE(view.ok()) << view.status().ToString();
+  EXPECT_EQ(view->major_version(), 1);
+  EXPECT_EQ(view->minor_version(), 0);
+  ASSERT_EQ(view->clip_count(), 1u);
+  EXPECT_EQ(view->clip(0).name, "");
+  EXPECT_EQ(view->clip(0).first_frame, 0u);
+  EXPECT_EQ(view->clip(0).frame_count, 3u);
+  EXPECT_EQ(view->clip(0).fps, 29.97);
+  EXPECT_EQ(view->FindClip(""), 0);
+  EXPECT_EQ(ToLevelSetData(*view), data);
+  for (uint32_t t = 0; t < 3; ++t) {
+    EXPECT_EQ(view->level(1).matrix(t, 3)[11], SampleValue(1, t, 3, 11));
+  }
+}
+
+TEST(Version1, ReencodesAsTheVersion2FileOfTheSameContent) {
+  for (const LevelSetData& data : {MakeSample(), MakeRigidSample()}) {
+    const AlignedBytes v1 = AlignedBytes::CopyOf(test_v1::EncodeVersion1(data));
+    const LevelSetView view = DecodeLevelSet(v1.bytes()).value();
+    const std::string again = EncodeLevelSet(ToLevelSetData(view)).value();
+    const std::string v2 = EncodeLevelSet(data).value();
+    ASSERT_EQ(again.size(), v2.size());
+    EXPECT_EQ(std::memcmp(again.data(), v2.data(), v2.size()), 0);
+    // What the server streams from a 1.0 file is a 2.0 file.
+    const AlignedBytes one = AlignedBytes::CopyOf(ExtractLevel(view, 1).value());
+    const LevelSetView single = DecodeLevelSet(one.bytes()).value();
+    EXPECT_EQ(single.major_version(), kLevelFormatMajorVersion);
+    EXPECT_EQ(ToLevelSetData(single).levels[0], data.levels[1]);
+    EXPECT_EQ(ExtractLevelClip(view, 1, 0).value(), ExtractLevel(view, 1).value());
+  }
+}
+
+TEST(Version1, KeepsItsOwnRules) {
+  const LevelSetData data = MakeSample();
+  // 1.0: offset 100 is reserved, and there are 4 + 3L sections.
+  test_v1::Version1Options reserved;
+  reserved.reserved = 3;
+  Status status =
+      DecodeLevelSet(AlignedBytes::CopyOf(test_v1::EncodeVersion1(data, reserved)).bytes())
+          .status();
+  EXPECT_EQ(status.code(), StatusCode::kDataLoss);
+  EXPECT_THAT(status.message(), HasSubstr("reserved"));
+  test_v1::Version1Options extra;
+  extra.trailing_section = "a section 1.0 does not have";
+  status =
+      DecodeLevelSet(AlignedBytes::CopyOf(test_v1::EncodeVersion1(data, extra)).bytes()).status();
+  EXPECT_THAT(status.message(), HasSubstr("section count 14 for 3 levels (expected 13)"));
+  // A later 1.x minor version may fill them; this build skips what it does not know.
+  test_v1::Version1Options later = extra;
+  later.minor_version = 2;
+  later.reserved = 3;
+  const AlignedBytes later_bytes = AlignedBytes::CopyOf(test_v1::EncodeVersion1(data, later));
+  StatusOr<LevelSetView> view = DecodeLevelSet(later_bytes.bytes());
+  ASSERT_TRUE(view.ok()) << view.status().ToString();
+  EXPECT_EQ(view->minor_version(), 2);
+  EXPECT_EQ(ToLevelSetData(*view), data);
+  // A 1.0 file's truncations are data loss too.
+  const AlignedBytes v1 = AlignedBytes::CopyOf(test_v1::EncodeVersion1(MakeSample(1)));
+  for (size_t size = 0; size < v1.size(); ++size) {
+    ASSERT_EQ(DecodeLevelSet(v1.bytes().first(size)).status().code(), StatusCode::kDataLoss)
+        << size;
+  }
 }
 
 }  // namespace
