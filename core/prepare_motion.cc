@@ -161,7 +161,7 @@ StatusOr<std::shared_ptr<const PreparedMotion>> PreparedMotion::Create(
   for (int j = 0; j < n; ++j) {
     d.joint_fit[j] = d.alpha * d.joint_cp[j] + d.beta_fit * d.joint_cn[j];
   }
-  d.original_rotations = internal::AllRotations(d.kt, simd);
+  d.original_rotations = internal::AllRotations(d.kt, simd, internal::kRigidLevelRotation);
   d.clips = motion.Clips();
   if (d.clips.size() > 1) {
     for (const MotionClip& clip : d.clips) {

@@ -48,7 +48,7 @@ inline void TransposeRotationRows(const MatrixXd& from, MatrixXd& to) {
 // contiguous doubles, the translation's last) is transposed into lanes, and the column
 // products of R^T R and the determinant (the columns' triple product) are whole vectors;
 // the last group repeats its last joint.
-inline bool AllRotationsKernel(const MatrixXd& x) {
+inline bool AllRotationsKernel(const MatrixXd& x, double tolerance) {
   const Eigen::Index joints = x.rows() / 4, stride = x.rows();
   for (Eigen::Index t = 0; t < x.cols(); t += 3) {
     const double* frame = x.data() + t * stride;
@@ -77,7 +77,7 @@ inline bool AllRotationsKernel(const MatrixXd& x) {
       const Lanes4 determinant = c0[0] * (c1[1] * c2[2] - c1[2] * c2[1]) -
                                  c0[1] * (c1[0] * c2[2] - c1[2] * c2[0]) +
                                  c0[2] * (c1[0] * c2[1] - c1[1] * c2[0]);
-      const auto rotation = (error_squared <= 1e-10) & (determinant > 0);
+      const auto rotation = (error_squared <= tolerance * tolerance) & (determinant > 0);
       for (int j = 0; j < 4; ++j) {
         if (rotation[j] == 0) return false;
       }
@@ -85,7 +85,6 @@ inline bool AllRotationsKernel(const MatrixXd& x) {
   }
   return true;
 }
-
 
 // The right-hand sides of the translations' re-solve with the rotations of x fixed,
 // b_T - G_TN x_N, transposed (3T x m), from b_T^T (bt) in place.
@@ -289,8 +288,8 @@ void RotationSweeps(const PreparedData& d, const BlockRows& g_rows,
 
 }  // namespace
 
-bool AllRotations(const MatrixXd& x, SimdChoice simd) {
-  return RunWithSimd(simd, [&] { return AllRotationsKernel(x); });
+bool AllRotations(const MatrixXd& x, SimdChoice simd, double tolerance) {
+  return RunWithSimd(simd, [&] { return AllRotationsKernel(x, tolerance); });
 }
 
 Status ProjectOnRotations(const PreparedData& d, const ReducedSkeleton& level, LevelSystem& system) {

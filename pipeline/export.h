@@ -12,12 +12,14 @@
 namespace motionlod::pipeline {
 
 // The level of `level_set` (a level-set file, or a one-level file) that keeps `joints`
-// joints, skinning `character` (the asset the level set was baked for), as a .glb whose
-// animation is called `animation_name`. Errors: kInvalidArgument (no level keeps that
-// many joints: the message lists those that exist; the level set belongs to another
-// character), kDataLoss (the level set does not decode), and the importer's and the
-// exporter's errors.
+// joints, skinning `character` (the asset the level set was baked for), as a .glb with
+// one animation: the clip named `clip_name` ("" = the first), called after it. A level
+// set of one unnamed clip (format 1.0) plays that clip under the given name. Errors:
+// kInvalidArgument (no level keeps that many joints: the message lists those that exist;
+// the level set belongs to another character), kNotFound (no such clip: the message lists
+// them), kDataLoss (the level set does not decode), and the importer's and the exporter's
+// errors.
 StatusOr<io::GltfExport> ExportLevelGltf(const io::Asset& character, std::string_view level_set,
-                                         int joints, const std::string& animation_name);
+                                         int joints, const std::string& clip_name);
 
 }  // namespace motionlod::pipeline

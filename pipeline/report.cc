@@ -51,7 +51,12 @@ StatusOr<std::string> EncodeSolvedLevels(const core::Character& character,
   set.flags = core::IsRigid(settings.variant) ? proto::kLevelSetFlagRigid : 0;
   set.algorithm_version = core::kAlgorithmVersion;
   set.frame_count = static_cast<uint32_t>(motion.frame_count);
-  set.fps = motion.fps;
+  const std::vector<core::MotionClip> clips = motion.Clips();
+  set.fps = clips.front().fps;  // the format's header rate is the first clip's
+  for (const core::MotionClip& clip : clips) {
+    set.clips.push_back({clip.name, static_cast<uint32_t>(clip.first_frame),
+                         static_cast<uint32_t>(clip.frame_count), clip.fps});
+  }
   set.source_hash = source_hash;
   set.settings_hash = settings.Hash();
   const core::RawSkeleton& skeleton = character.skeleton();

@@ -41,8 +41,9 @@ struct PreparedData {
   // (o0_j the bind y axis).
   std::vector<Eigen::Matrix4d> joint_cp, joint_cn;
   std::vector<Eigen::Matrix4d> joint_fit;  // J_j with alpha and beta_fit
-  // Whether every K_k(t) is a rotation (AllRotations): then the reparented matrices are a
-  // candidate of the rigid variants too (KeepNoWorseThanReparenting).
+  // Whether every K_k(t) is a rotation as a rigid level set's matrices must be
+  // (AllRotations to kRigidLevelRotation): then the reparented matrices are a candidate of
+  // the rigid variants too (KeepNoWorseThanReparenting).
   bool original_rotations = false;
   double alpha = 1, beta = 1;
   double beta_fit = 1;  // beta where the variant fits normals, else 0

@@ -17,10 +17,13 @@
 namespace motionlod::core::internal {
 
 // Whether every 3x3 block of x (4m x 3T, one 4x3 block K^T per joint and frame) is a
-// rotation to within the precision of float source data, |R^T R - I|_F <= 1e-5 and
-// det R > 0. Composed through a skeleton's hierarchy, the float matrices of glTF, FBX and
-// Collada files are orthonormal to 3e-6 to 8e-6 (2e-16 for BVH).
-bool AllRotations(const Eigen::MatrixXd& x, SimdChoice simd);
+// rotation, |R^T R - I|_F <= tolerance and det R > 0. Composed through a skeleton's
+// hierarchy, the float matrices of glTF, FBX and Collada files are orthonormal to 3e-6 to
+// 8e-6 (2e-16 for BVH): kFloatRotation takes them as they are.
+inline constexpr double kFloatRotation = 1e-5;
+// What a rigid level set promises its clients (proto/level_format.h, kLevelSetFlagRigid).
+inline constexpr double kRigidLevelRotation = 1e-3;
+bool AllRotations(const Eigen::MatrixXd& x, SimdChoice simd, double tolerance = kFloatRotation);
 
 // Projects system.x (the least-squares solution of `level`) on rotations and, with
 // SolveSettings::resolve_rigid_translation, fits its translations and rotations under the

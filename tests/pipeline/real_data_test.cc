@@ -43,6 +43,7 @@ RealScene Load(const std::string& file, double fps = 0, int max_frames = 0) {
   EXPECT_TRUE(asset.ok()) << file << ": " << asset.status().ToString();
   BakeRequest request;
   request.character = *asset;
+  request.animations = {""};  // the first clip
   request.fps = fps;
   auto inputs = PrepareInputs(request);
   EXPECT_TRUE(inputs.ok()) << file << ": " << inputs.status().ToString();
@@ -64,10 +65,12 @@ std::shared_ptr<const core::PreparedMotion> Prepare(const RealScene& s, core::Va
   return *prepared;
 }
 
-// A bake of `asset`'s default ladder in `variant`, without the report's skinning pass.
+// A bake of `asset`'s first clip's default ladder in `variant`, without the report's
+// skinning pass.
 BakeRequest DefaultLadderRequest(std::shared_ptr<const io::Asset> asset, core::Variant variant) {
   BakeRequest request;
   request.character = std::move(asset);
+  request.animations = {""};  // the first clip
   request.settings.variant = variant;
   request.measure_skinning_pass = false;
   return request;
