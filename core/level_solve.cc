@@ -289,8 +289,12 @@ Status PreparedMotion::LiftCoarserLevel(const LevelResult& coarser, LevelResult&
     std::vector<int> solution_row(d.n);
     for (int k = 0; k < d.n; ++k) solution_row[k] = 4 * to.joint_to_slot[k];
     LevelErrors figures = PartFigures(part, to, &x, solution_row, {});
+    // Rigid levels keep their bones: a joint that rides on a coarser joint's matrix may
+    // not stretch them.
     if (!NoWorseThan(figures, finer.baseline.per_clip[c]) ||
-        figures.max_vertex_error_pct >= finer.optimized.per_clip[c].max_vertex_error_pct) {
+        figures.max_vertex_error_pct >= finer.optimized.per_clip[c].max_vertex_error_pct ||
+        (IsRigid(d.settings.variant) &&
+         figures.bone_length_drift_pct > internal::kRigidBoneLengthDriftPct)) {
       continue;
     }
     for (int t = clip.first_frame; t < clip.first_frame + clip.frame_count; ++t) {

@@ -298,10 +298,10 @@ Status ProjectOnRotations(const PreparedData& d, const ReducedSkeleton& level, L
     // rotations' step: on the levels of five real characters a third round and a third sweep
     // still lowered the vertex error, more did not measurably.
     constexpr int kRounds = 3, kSweeps = 3;
-    // Bone lengths are held within this fraction of the height of the original's: the 2%
-    // the rigid variants promise, less a margin. Each bone held closer costs vertex error
+    // Bone lengths are held within this fraction of the height of the original's: what the
+    // rigid variants promise, less a margin. Each bone held closer costs vertex error
     // (exact lengths cost up to 7% of the height more in the maximum on CesiumMan).
-    constexpr double kBoneLengthTolerance = 0.019;
+    constexpr double kBoneLengthTolerance = 0.95 * kRigidBoneLengthDriftPct / 100;
     const int m = system.g.block_count();
     MatrixXd& x = system.x;
     const MatrixXd x_ls = d.settings.resolve_rigid_translation ? x : MatrixXd();

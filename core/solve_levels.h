@@ -198,7 +198,8 @@ class PreparedMotion {
   // `finer` keeps every joint `coarser` keeps: each clip whose maximum vertex error is
   // above the coarser level's takes the coarser level's matrices (each kept joint its
   // coarser ancestor's: the same mesh, so the same vertex figures) where that stays no
-  // worse than the finer level's baseline, so that adding joints never raises the error.
+  // worse than the finer level's baseline (and, rigid, within the bone lengths' 2%), so
+  // that adding joints never raises the error.
   Status LiftCoarserLevel(const LevelResult& coarser, LevelResult& finer) const;
 
   // The core's steps read the prepared data (core/internal/prepared_data.h).

@@ -21,6 +21,10 @@ namespace motionlod::core::internal {
 // hierarchy, the float matrices of glTF, FBX and Collada files are orthonormal to 3e-6 to
 // 8e-6 (2e-16 for BVH): kFloatRotation takes them as they are.
 inline constexpr double kFloatRotation = 1e-5;
+// What the rigid variants promise: each kept joint's distance to its kept parent within
+// this percentage of the character's height of the original's on every frame.
+inline constexpr double kRigidBoneLengthDriftPct = 2.0;
+
 // What a rigid level set promises its clients (proto/level_format.h, kLevelSetFlagRigid).
 inline constexpr double kRigidLevelRotation = 1e-3;
 bool AllRotations(const Eigen::MatrixXd& x, SimdChoice simd, double tolerance = kFloatRotation);

@@ -23,6 +23,7 @@
 #include "io/asset.h"
 #include "pipeline/bake.h"
 #include "proto/level_format.h"
+#include "proto/level_selection.h"
 
 namespace motionlod::pipeline {
 namespace {
@@ -701,6 +702,84 @@ TEST(SmallestLevelBracket, FollowsTheLadderAndStopsWhereItIsNotMonotone) {
             std::make_pair(8, 8));
   EXPECT_EQ(SmallestLevelBracket({{31, 1.0}, {8, 2.0}}, 3, 31, 26.0), std::make_pair(3, 8));
   EXPECT_EQ(SmallestLevelBracket({{31, 30.0}}, 1, 31, 26.0), std::make_pair(31, 31));
+}
+
+// A bake of several clips: one reduced skeleton per level for all of them, nested levels,
+// every clip's level no worse than reparenting it, rigid levels within 2% of their bone
+// lengths, the chosen levels' errors falling as joints are added, and a level set whose
+// clips each hold their own frames.
+TEST_F(RealData, CharacterWideLevelsServeEveryClip) {
+  struct Case {
+    const char* file;
+    std::vector<std::string> clips;  // empty: every animation
+    size_t clip_count;
+  };
+  const Case cases[] = {{"characters/Fox.glb", {}, 3},
+                        {"characters/RobotExpressive.glb", {"Idle", "Punch", "Walking", "Jump"}, 4}};
+  for (const Case& c : cases) {
+    for (core::Variant variant : {core::Variant::kVP, core::Variant::kVPNOPD}) {
+      BakeRequest request;
+      request.character = *io::LoadAssetFile(DataPath(c.file));
+      request.animations = c.clips;
+      request.all_levels = true;
+      request.settings.variant = variant;
+      request.threads = 2;
+      request.measure_skinning_pass = false;
+      const auto baked = Bake(request);
+      ASSERT_TRUE(baked.ok()) << baked.status().ToString();
+      const std::string where = std::string(c.file) + " " + core::VariantName(variant);
+      const nlohmann::json& report = baked->report;
+      EXPECT_EQ(report["ranking_method"], "greedy");
+      ASSERT_EQ(report["clips"].size(), c.clip_count) << where;
+      const proto::AlignedBytes bytes = proto::AlignedBytes::CopyOf(baked->level_set);
+      const auto view = proto::DecodeLevelSet(bytes.bytes());
+      ASSERT_TRUE(view.ok()) << view.status().ToString();
+      ASSERT_EQ(view->clips().size(), c.clip_count);
+      for (size_t k = 0; k < c.clip_count; ++k) {
+        EXPECT_EQ(view->clips()[k].name, report["clips"][k]["name"].get<std::string>());
+        EXPECT_EQ(view->clips()[k].frame_count, report["clips"][k]["frames"].get<uint32_t>());
+      }
+      std::vector<double> max_error_fraction;
+      for (uint32_t l = 0; l < view->level_count(); ++l) {
+        const nlohmann::json& level = report["levels"][l];
+        const std::string at = where + " at " + std::to_string(level["joints"].get<int>()) + " joints";
+        ASSERT_EQ(level["per_clip"].size(), c.clip_count);
+        double worst = 0;
+        for (const nlohmann::json& clip : level["per_clip"]) {
+          EXPECT_LE(clip["max_vertex_error_pct"].get<double>(), clip["baseline_max_vertex_error_pct"].get<double>()) << at;
+          EXPECT_LE(clip["mean_vertex_error_pct"].get<double>(), clip["baseline_mean_vertex_error_pct"].get<double>()) << at;
+          worst = std::max(worst, clip["max_vertex_error_pct"].get<double>());
+        }
+        EXPECT_EQ(level["max_vertex_error_pct"].get<double>(), worst) << at;
+        if (core::IsRigid(variant)) {
+          EXPECT_LE(level["bone_length_drift_pct"].get<double>(), 2.0) << at;
+        }
+        max_error_fraction.push_back(level["max_vertex_error_pct"].get<double>() / 100);
+        // Nested: each level keeps every joint of the next coarser one.
+        if (l + 1 < view->level_count()) {
+          const auto finer = view->level(l).kept_joints(), coarser = view->level(l + 1).kept_joints();
+          EXPECT_TRUE(std::includes(finer.begin(), finer.end(), coarser.begin(), coarser.end())) << at;
+        }
+        // Each clip's one-level file holds that clip's frames of the level.
+        const uint32_t k = static_cast<uint32_t>(l % c.clip_count);
+        const auto one = proto::ExtractLevelClip(*view, l, k);
+        ASSERT_TRUE(one.ok()) << one.status().ToString();
+        const proto::AlignedBytes one_bytes = proto::AlignedBytes::CopyOf(*one);
+        const auto clip_view = proto::DecodeLevelSet(one_bytes.bytes());
+        ASSERT_TRUE(clip_view.ok());
+        ASSERT_EQ(clip_view->frame_count(), view->clips()[k].frame_count);
+        EXPECT_EQ(clip_view->level(0).frame(0)[5], view->level(l).frame(view->clips()[k].first_frame)[5]) << at;
+      }
+      // The levels the table chooses: fewer joints, never less error.
+      const std::vector<proto::LevelRange> ranges = proto::LevelRanges(max_error_fraction, 1.0);
+      double finer_error = 0;
+      for (size_t l = 0; l < ranges.size(); ++l) {
+        if (!ranges[l].chosen) continue;
+        EXPECT_GE(max_error_fraction[l], finer_error) << where << " level " << l;
+        finer_error = max_error_fraction[l];
+      }
+    }
+  }
 }
 
 TEST_F(RealData, BakeWritesALevelSetThatDecodesToTheSolvedMatrices) {
