@@ -134,8 +134,7 @@ pipeline::BakeRequest RequestOf(const Case& c, core::Variant variant, int thread
   pipeline::BakeRequest request;
   request.simd = Simd();
   request.character = c.character;
-  request.motion = c.motion;
-  request.animations = {c.animation};
+  request.clips = {{c.motion, c.animation, ""}};
   request.settings.variant = variant;
   request.threads = threads;
   request.character_label = c.file;

@@ -194,40 +194,40 @@ StatusOr<BakeInputs> PrepareInputsOn(const BakeRequest& request, TaskPool& pool)
   BakeInputs inputs;
   const io::Asset& character_asset = *request.character;
   inputs.warnings = character_asset.warnings();
-  // The character and the motion are built side by side: the motion needs only the asset.
-  const io::Asset& motion_source = request.motion ? *request.motion : character_asset;
-  std::vector<std::string> names = request.animations;
-  if (names.empty()) {
-    for (const io::AnimationInfo& animation : motion_source.animations()) names.push_back(animation.name);
-    if (names.empty()) names.push_back("");  // sampling says the source has no animation
-  }
+  // The character and the motion are built side by side: the motion needs only the assets.
+  const std::vector<ClipSource> sources =
+      request.clips.empty() ? EveryClipOf(character_asset, nullptr, "") : request.clips;
   std::optional<StatusOr<std::shared_ptr<const core::Character>>> character;
   Status motion_status;
   std::vector<std::string> motion_warnings;
-  std::vector<core::Motion> clips(names.size());
+  std::vector<core::Motion> clips(sources.size());
   pool.Run(2, [&](int task) {
     if (task == 0) {
       character = core::BuildCharacter(character_asset.character(), pool.Runner());
       return;
     }
-    for (size_t c = 0; c < names.size() && motion_status.ok(); ++c) {
-      if (request.motion) {
-        auto retargeted = io::RetargetAnimation(*request.motion, names[c], request.fps,
+    std::vector<const io::Asset*> warned;  // a motion file's unmatched joints, once
+    for (size_t c = 0; c < sources.size() && motion_status.ok(); ++c) {
+      const ClipSource& source = sources[c];
+      if (source.motion) {
+        auto retargeted = io::RetargetAnimation(*source.motion, source.animation, request.fps,
                                                 character_asset.character(), pool.Runner());
         if (!retargeted.ok()) {
           motion_status = retargeted.status();
           return;
         }
         clips[c] = std::move(retargeted->motion);
-        if (c > 0) continue;  // every clip of one file matches the same joints
+        if (std::find(warned.begin(), warned.end(), source.motion.get()) != warned.end()) continue;
+        warned.push_back(source.motion.get());
+        const std::string from = source.label.empty() ? "the motion" : "'" + source.label + "'";
         for (const std::string& name : retargeted->unmatched_target_joints) {
-          motion_warnings.push_back("joint '" + name + "' has no match in the motion: it keeps its bind pose");
+          motion_warnings.push_back("joint '" + name + "' has no match in " + from + ": it keeps its bind pose");
         }
         for (const std::string& name : retargeted->unmatched_source_joints) {
-          motion_warnings.push_back("the motion's joint '" + name + "' matches no joint of the character");
+          motion_warnings.push_back(from + "'s joint '" + name + "' matches no joint of the character");
         }
       } else {
-        auto motion = character_asset.SampleAnimation(names[c], request.fps, pool.Runner());
+        auto motion = character_asset.SampleAnimation(source.animation, request.fps, pool.Runner());
         if (!motion.ok()) {
           motion_status = motion.status();
           return;
@@ -262,6 +262,17 @@ StatusOr<BakeInputs> PrepareInputsOn(const BakeRequest& request, TaskPool& pool)
 }
 
 }  // namespace
+
+std::vector<ClipSource> EveryClipOf(const io::Asset& character,
+                                    std::shared_ptr<const io::Asset> source, const std::string& label) {
+  const io::Asset& file = source ? *source : character;
+  std::vector<ClipSource> clips;
+  for (const io::AnimationInfo& animation : file.animations()) {
+    clips.push_back({source, animation.name, label});
+  }
+  if (clips.empty()) clips.push_back({source, "", label});
+  return clips;
+}
 
 StatusOr<BakeInputs> PrepareInputs(const BakeRequest& request) {
   if (Status status = request.Validate(); !status.ok()) return status;

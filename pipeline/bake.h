@@ -26,15 +26,24 @@
 
 namespace motionlod::pipeline {
 
+// One clip to bake: an animation of the character's own file, or of a separate motion file
+// retargeted onto the character by joint name.
+struct ClipSource {
+  std::shared_ptr<const io::Asset> motion;  // null: the character's own file
+  std::string animation;                    // "" = the source's first
+  std::string label;                        // the motion file's name, for the report
+};
+
+// Every animation of `source` (null: `character`'s own file), in the file's order; one
+// unnamed clip (the first, which sampling then finds missing) where it has none.
+std::vector<ClipSource> EveryClipOf(const io::Asset& character,
+                                    std::shared_ptr<const io::Asset> source, const std::string& label);
+
 struct BakeRequest {
   std::shared_ptr<const io::Asset> character;
-  // A separate motion file retargeted onto the character by joint name; null to use
-  // the character's own animation.
-  std::shared_ptr<const io::Asset> motion;
-  // The clips baked together, by name, in this order: one reduced skeleton per level for
-  // all of them, matrices and figures per clip. Empty = every animation of the motion
-  // source ("" in the list: its first).
-  std::vector<std::string> animations;
+  // The clips baked together, in this order: one reduced skeleton per level for all of
+  // them, matrices and figures per clip. Empty = every animation of the character's file.
+  std::vector<ClipSource> clips;
   double fps = 0;         // 0 = the source's rate
   // Kept joint counts, any order; empty = the default ladder (full, ~3/4, ~1/2, ~1/4 and
   // the smallest useful skeleton). all_levels: every count from n down to the minimum.
@@ -58,7 +67,7 @@ struct BakeRequest {
   // costs a sixth to a third of the bake again, outside bake_seconds.
   bool measure_skinning_pass = true;
   std::array<uint8_t, 32> source_hash{};  // SHA-256 of the inputs, stored in the level set
-  std::string character_label, motion_label;  // for the report (file names)
+  std::string character_label;  // for the report (the file's name)
 
   Status Validate() const;
 };

@@ -1,5 +1,6 @@
 #include "pipeline/report.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <numeric>
@@ -122,20 +123,30 @@ json BuildReport(const ReportInputs& in) {
                          {"height", in.character.height()},
                          {"proxy_skin", in.request.character->has_proxy_skin()}};
   const std::vector<core::MotionClip> clips = in.motion.Clips();
-  std::string names;
+  std::string names, sources;
+  std::vector<std::string> seen_sources;
   double seconds = 0;
   json clip_table = json::array();
-  for (const core::MotionClip& clip : clips) {
+  for (size_t c = 0; c < clips.size(); ++c) {
+    const core::MotionClip& clip = clips[c];
+    // The file it came from: a motion file's label, else the character's.
+    const ClipSource* from = c < in.request.clips.size() ? &in.request.clips[c] : nullptr;
+    const std::string source = from && from->motion ? from->label : in.request.character_label;
     names += (names.empty() ? "" : ", ") + clip.name;
+    if (std::find(seen_sources.begin(), seen_sources.end(), source) == seen_sources.end()) {
+      seen_sources.push_back(source);
+      sources += (sources.empty() ? "" : ", ") + source;
+    }
     seconds += (clip.frame_count - 1) / clip.fps;
     clip_table.push_back({{"name", clip.name},
+                          {"source", source},
                           {"first_frame", clip.first_frame},
                           {"frames", clip.frame_count},
                           {"fps", clip.fps},
                           {"seconds", (clip.frame_count - 1) / clip.fps}});
   }
   report["motion"] = {{"name", names},
-                      {"source", in.request.motion ? in.request.motion_label : in.request.character_label},
+                      {"source", sources},
                       {"frames", in.motion.frame_count},
                       {"fps", clips.front().fps},
                       {"seconds", seconds}};

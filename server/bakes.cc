@@ -55,10 +55,10 @@ BakeKey MakeBakeKey(const api::BakeRequest& resolved, const std::string& motion_
 }
 
 pipeline::BakeRequest MakePipelineRequest(const api::BakeRequest& resolved,
-                                          const std::string& animation, int bake_threads,
+                                          pipeline::ClipSource clip, int bake_threads,
                                           core::SimdChoice simd) {
   pipeline::BakeRequest request;
-  request.animations = {animation};
+  request.clips = {std::move(clip)};
   request.fps = resolved.fps;
   request.levels = resolved.levels;
   request.all_levels = resolved.all_levels;
@@ -153,7 +153,7 @@ Result<Created<api::JobStatus>> Bakes::Submit(const api::BakeRequest& request) {
     }
   }
   const pipeline::BakeRequest pipeline_request =
-      MakePipelineRequest(resolved, motion->animation, context_.config.bake_threads,
+      MakePipelineRequest(resolved, {nullptr, motion->animation, ""}, context_.config.bake_threads,
                           context_.config.simd);
   if (Status status = pipeline_request.settings.Validate(); !status.ok()) {
     return Error(ErrorKind::kBadRequest, status.message());

@@ -49,9 +49,10 @@ struct BakeKey {
 BakeKey MakeBakeKey(const proto::api::BakeRequest& resolved, const std::string& motion_source_id,
                     const std::string& animation, uint64_t settings_hash);
 
-// The pipeline request the daemon bakes for a resolved API request (without assets).
+// The pipeline request the daemon bakes for a resolved API request and its clip (without
+// the character's asset).
 pipeline::BakeRequest MakePipelineRequest(const proto::api::BakeRequest& resolved,
-                                          const std::string& animation, int bake_threads,
+                                          pipeline::ClipSource clip, int bake_threads,
                                           core::SimdChoice simd = core::SimdChoice::kWidest);
 
 }  // namespace motionlod::server

@@ -238,21 +238,22 @@ void Jobs::Run(const std::string& id) {
     return Publish(job, true);  // deleted meanwhile
   }
   const MotionRecord& m = **motion;
+  pipeline::ClipSource clip{nullptr, m.animation, ""};
+  if (m.source == "file") {
+    auto motion_asset = context_.LoadSource(m.source_id, m.files);
+    if (!motion_asset.ok())
+      return fail(StatusCodeName(motion_asset.status().code()), motion_asset.status().message());
+    clip.motion = *motion_asset;
+    clip.label = m.files.empty() ? "" : m.files[0].name;
+  }
   pipeline::BakeRequest p =
-      MakePipelineRequest(*request, m.animation, context_.config.bake_threads, context_.config.simd);
+      MakePipelineRequest(*request, std::move(clip), context_.config.bake_threads, context_.config.simd);
   auto character_asset = context_.LoadSource((*character)->id, (*character)->files);
   if (!character_asset.ok())
     return fail(StatusCodeName(character_asset.status().code()),
                 character_asset.status().message());
   p.character = *character_asset;
   p.character_label = (*character)->name;
-  if (m.source == "file") {
-    auto motion_asset = context_.LoadSource(m.source_id, m.files);
-    if (!motion_asset.ok())
-      return fail(StatusCodeName(motion_asset.status().code()), motion_asset.status().message());
-    p.motion = *motion_asset;
-    p.motion_label = m.files.empty() ? "" : m.files[0].name;
-  }
   p.source_hash = MakeBakeKey(*request, m.source == "file" ? m.source_id : "character", m.animation,
                               p.settings.Hash())
                       .source_hash;

@@ -101,12 +101,16 @@ StatusOr<pipeline::BakeRequest> MakeRequest(const CommonOptions& o) {
   auto character = Load(o.character);
   if (!character.ok()) return character.status();
   request.character = *character;
+  std::shared_ptr<const io::Asset> motion;
+  const std::string label = std::filesystem::path(o.motion).filename().string();
   if (!o.motion.empty()) {
-    auto motion = Load(o.motion);
-    if (!motion.ok()) return motion.status();
-    request.motion = *motion;
+    auto loaded = Load(o.motion);
+    if (!loaded.ok()) return loaded.status();
+    motion = *loaded;
   }
-  request.animations = o.animations;
+  // No --animation: every animation of the motion file (or, without one, of the character).
+  if (o.animations.empty() && motion) request.clips = pipeline::EveryClipOf(**character, motion, label);
+  for (const std::string& animation : o.animations) request.clips.push_back({motion, animation, label});
   request.fps = o.fps;
   request.locked_joints = o.locked;
   auto ranking = core::ParseRankingMethod(o.ranking);
@@ -115,7 +119,6 @@ StatusOr<pipeline::BakeRequest> MakeRequest(const CommonOptions& o) {
   request.threads = o.threads;
   request.simd = o.simd;
   request.character_label = std::filesystem::path(o.character).filename().string();
-  request.motion_label = std::filesystem::path(o.motion).filename().string();
   return request;
 }
 

@@ -33,7 +33,7 @@ Baked BakeInProcess(const std::string& path, const std::string& animation,
   if (!asset.ok()) return baked;
   pipeline::BakeRequest request;
   request.character = *asset;
-  request.animations = {animation};
+  request.clips = {{nullptr, animation, ""}};
   request.levels = std::move(levels);
   request.settings.variant = variant;
   request.threads = 2;

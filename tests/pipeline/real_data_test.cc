@@ -44,7 +44,7 @@ RealScene Load(const std::string& file, double fps = 0, int max_frames = 0) {
   EXPECT_TRUE(asset.ok()) << file << ": " << asset.status().ToString();
   BakeRequest request;
   request.character = *asset;
-  request.animations = {""};  // the first clip
+  request.clips = {{nullptr, "", ""}};  // the first clip
   request.fps = fps;
   auto inputs = PrepareInputs(request);
   EXPECT_TRUE(inputs.ok()) << file << ": " << inputs.status().ToString();
@@ -71,7 +71,7 @@ std::shared_ptr<const core::PreparedMotion> Prepare(const RealScene& s, core::Va
 BakeRequest DefaultLadderRequest(std::shared_ptr<const io::Asset> asset, core::Variant variant) {
   BakeRequest request;
   request.character = std::move(asset);
-  request.animations = {""};  // the first clip
+  request.clips = {{nullptr, "", ""}};  // the first clip
   request.settings.variant = variant;
   request.measure_skinning_pass = false;
   return request;
@@ -165,9 +165,10 @@ TEST_F(RealData, RigidFullLevelKeepsRotationsAndChecksEveryJointOfEveryFrame) {
       }
     }
   }
-  // Any one joint that is no rotation in one frame (scaled by 1.0001, or mirrored), whatever
+  // Any one joint that is no rotation in one frame (scaled by 1.01, or mirrored), whatever
   // its lane in its group: the level goes through the solve and the projection, which
-  // leaves a rotation where it was.
+  // leaves a rotation where it was (and the original matrices, which a rigid level set
+  // could not hold, are no candidate for the level).
   for (int bad = 0; bad < n; ++bad) {
     for (bool mirror : {false, true}) {
       RealScene s = base;
@@ -176,7 +177,7 @@ TEST_F(RealData, RigidFullLevelKeepsRotationsAndChecksEveryJointOfEveryFrame) {
       if (mirror) {
         world.col(0) *= -1;
       } else {
-        world.leftCols<3>() *= 1.0001;
+        world.leftCols<3>() *= 1.01;
       }
       const auto [prepared, result] = full_level(s);
       const core::RowMajorAffine34f& solved = result.matrices[static_cast<size_t>(t) * n + bad];
@@ -240,10 +241,13 @@ TEST_F(RealData, RigidVariantsStoreRotationsAndReSolvedTranslationHelps) {
   for (int kept : {30, 15, 6}) {
     const auto r = prepared->SolveLevel(Level(s, kept));
     ASSERT_TRUE(r.ok());
+    // Rotations to the rigid level set's 1e-3: a clip that reparenting serves better keeps
+    // the source's matrices, whose float rotations RobotExpressive composes to 1e-4.
     for (const core::RowMajorAffine34f& k : r->matrices) {
       const Eigen::Matrix3d rot = k.leftCols<3>().cast<double>();
-      ASSERT_NEAR((rot.transpose() * rot - Eigen::Matrix3d::Identity()).norm(), 0, 1e-5);
-      ASSERT_NEAR(rot.determinant(), 1.0, 1e-5);
+      ASSERT_NEAR((rot.transpose() * rot - Eigen::Matrix3d::Identity()).norm(), 0,
+                  r->sources[0] == core::LevelSource::kSolved ? 1e-5 : 1e-3);
+      ASSERT_NEAR(rot.determinant(), 1.0, 1e-3);
     }
     const auto r_keep = kept_t->SolveLevel(Level(s, kept));
     EXPECT_LE(r->optimized.mean_e, r_keep->optimized.mean_e * (1 + 1e-9)) << kept;
@@ -720,7 +724,7 @@ TEST_F(RealData, CharacterWideLevelsServeEveryClip) {
     for (core::Variant variant : {core::Variant::kVP, core::Variant::kVPNOPD}) {
       BakeRequest request;
       request.character = *io::LoadAssetFile(DataPath(c.file));
-      request.animations = c.clips;
+      for (const std::string& clip : c.clips) request.clips.push_back({nullptr, clip, ""});
       request.all_levels = true;
       request.settings.variant = variant;
       request.threads = 2;
@@ -787,7 +791,7 @@ TEST_F(RealData, BakeWritesALevelSetThatDecodesToTheSolvedMatrices) {
   ASSERT_TRUE(asset.ok());
   BakeRequest request;
   request.character = *asset;
-  request.animations = {"Walk"};
+  request.clips = {{nullptr, "Walk", ""}};
   request.levels = {24, 12, 5};
   request.ranking_method = core::RankingMethod::kPaper;
   request.threads = 2;

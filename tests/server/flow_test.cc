@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <set>
 
 #include "proto/level_selection.h"
@@ -32,15 +33,16 @@ pipeline::BakeOutput BakeLikeTheDaemon(const json& bake, const std::string& char
   auto request = proto::api::ParseBakeRequest(bake["request"].dump());
   EXPECT_TRUE(request.ok()) << request.status().message();
   const std::string animation = bake["animation"].get<std::string>();
-  pipeline::BakeRequest p = MakePipelineRequest(*request, animation, threads);
-  auto character = io::LoadAssetFile(character_path);
-  EXPECT_TRUE(character.ok());
-  p.character = *character;
+  pipeline::ClipSource clip{nullptr, animation, ""};
   if (!motion_path.empty()) {
     auto motion = io::LoadAssetFile(motion_path);
     EXPECT_TRUE(motion.ok());
-    p.motion = *motion;
+    clip = {*motion, animation, std::filesystem::path(motion_path).filename().string()};
   }
+  pipeline::BakeRequest p = MakePipelineRequest(*request, std::move(clip), threads);
+  auto character = io::LoadAssetFile(character_path);
+  EXPECT_TRUE(character.ok());
+  p.character = *character;
   const BakeKey key = MakeBakeKey(*request, motion_source_id, animation, p.settings.Hash());
   EXPECT_EQ(key.id, bake["id"].get<std::string>())
       << "the bake id is the hash of the resolved request";

@@ -58,7 +58,7 @@ TEST(DaemonRestart, JobsQueuedOrRunningAtASigkillCompleteAfterARestartWithIdenti
     // The uninterrupted run.
     auto request = proto::api::ParseBakeRequest(bake["request"].dump());
     ASSERT_TRUE(request.ok());
-    pipeline::BakeRequest p = MakePipelineRequest(*request, bake["animation"], 1);
+    pipeline::BakeRequest p = MakePipelineRequest(*request, {nullptr, bake["animation"], ""}, 1);
     p.character = *character;
     p.source_hash =
         MakeBakeKey(*request, "character", bake["animation"], p.settings.Hash()).source_hash;
