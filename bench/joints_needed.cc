@@ -82,9 +82,9 @@ int main(int argc, char** argv) {
   std::sort(files.begin(), files.end());
   std::printf("variant %s, %d threads; fewest joints within 1 px at 25/50/100/200 px tall\n",
               core::VariantName(*variant), threads);
-  std::printf("%-34s %6s %5s | %-15s | %-15s | %-15s | %8s %8s\n", "character (clips)", "joints",
-              "clips", "reparent", "paper", "greedy", "paper s", "greedy s");
-  std::vector<std::vector<double>> paper_ratio(kHeights), greedy_ratio(kHeights);
+  std::printf("%-34s %6s %5s | %-15s | %-15s | %-15s | %-15s | %8s %8s\n", "character (clips)", "joints",
+              "clips", "reparent", "paper", "greedy", "reparent+solve", "paper s", "greedy s");
+  std::vector<std::vector<double>> paper_ratio(kHeights), greedy_ratio(kHeights), solved_ratio(kHeights);
   pipeline::TaskPool pool(threads);
   for (const fs::path& file : files) {
     auto asset = io::LoadAssetFile(file.string());
@@ -138,15 +138,16 @@ int main(int argc, char** argv) {
     const double greedy_seconds = std::chrono::duration<double>(Clock::now() - start).count();
 
     const std::vector<int> r = FewestWithinOnePixel(reparent), p = FewestWithinOnePixel(paper),
-                           g = FewestWithinOnePixel(greedy);
+                           g = FewestWithinOnePixel(greedy),
+                           rs = FewestWithinOnePixel(solved_errors(*reparent_order));
     const auto row = [](const std::vector<int>& v) {
       char text[32];
       std::snprintf(text, sizeof text, "%3d %3d %3d %3d", v[0], v[1], v[2], v[3]);
       return std::string(text);
     };
-    std::printf("%-34s %6d %5zu | %s | %s | %s | %8.2f %8.2f\n", file.filename().string().c_str(), n,
+    std::printf("%-34s %6d %5zu | %s | %s | %s | %s | %8.2f %8.2f\n", file.filename().string().c_str(), n,
                 inputs->motion.Clips().size(), row(r).c_str(), row(p).c_str(), row(g).c_str(),
-                paper_seconds, greedy_seconds);
+                row(rs).c_str(), paper_seconds, greedy_seconds);
     std::fflush(stdout);
     // No level within 1 px counts as infinitely many joints.
     const auto ratio = [](int a, int b) { return a == 0 ? HUGE_VAL : static_cast<double>(a) / b; };
@@ -154,12 +155,13 @@ int main(int argc, char** argv) {
       if (r[h] == 0) continue;  // not even reparenting's full skeleton is within 1 px
       paper_ratio[h].push_back(ratio(p[h], r[h]));
       greedy_ratio[h].push_back(ratio(g[h], r[h]));
+      solved_ratio[h].push_back(ratio(rs[h], r[h]));
     }
   }
   std::printf("median ratio to reparent (cases where reparenting reaches 1 px):\n");
   for (int h = 0; h < kHeights; ++h) {
-    std::printf("  %3.0f px: paper %.2f, greedy %.2f (%zu cases)\n", kHeightsPx[h], Median(paper_ratio[h]),
-                Median(greedy_ratio[h]), greedy_ratio[h].size());
+    std::printf("  %3.0f px: paper %.2f, greedy %.2f, reparent+solve %.2f (%zu cases)\n", kHeightsPx[h],
+                Median(paper_ratio[h]), Median(greedy_ratio[h]), Median(solved_ratio[h]), greedy_ratio[h].size());
   }
   return 0;
 }

@@ -217,28 +217,23 @@ def replica_table(runs, lines):
 
 
 def naive_table(runs, skins, lines):
+    """The naive solve against the factored one: the range over the cases of each ratio."""
     cases = sorted({n[len("naive/"):] for n in runs if n.startswith("naive/")}, key=str.lower)
     if not cases:
         return
-    lines.append("| case | p | n | T | kept m | naive, scaled to T (s) | SolveLevel ms | SolveLeastSquares ms "
-                 "| naive / SolveLevel | naive / SolveLeastSquares | naive / skinning pass (1 thread) |")
-    lines.append("|---|---|---|---|---|---|---|---|---|---|---|")
+    ratios = {"SolveLevel": [], "SolveLeastSquares": [], "one skinning pass (1 thread)": []}
     for case in cases:
         naive = med_time(runs, "naive/" + case)
-        level = med_time(runs, "level/" + case)
-        ls = med_time(runs, "ls/" + case)
-        skin = med_time(runs, skins.get((case, 1), ""))
-        p, n, t = shape(runs, "naive/" + case)
-        kept = counter(runs, "naive/" + case, "kept")
-        frames = counter(runs, "naive/" + case, "naive_frames")
-
-        def r(a, b):
-            return fmt_ratio(a / b) if a and b else "–"
-
-        lines.append(
-            f"| `{case}` | {p:.0f} | {n:.0f} | {t:.0f} | {kept:.0f} | "
-            f"{naive:.2f} ({frames:.0f} frames timed) | {ms(level)} | {ms(ls)} | "
-            f"{r(naive, level)} | {r(naive, ls)} | {r(naive, skin)} |")
+        for key, other in (("SolveLevel", med_time(runs, "level/" + case)),
+                           ("SolveLeastSquares", med_time(runs, "ls/" + case)),
+                           ("one skinning pass (1 thread)", med_time(runs, skins.get((case, 1), "")))):
+            if naive and other:
+                ratios[key].append((naive / other, case))
+    for key, values in ratios.items():
+        if values:
+            low, high = min(values), max(values)
+            lines.append(f"- naive / {key}: {fmt_ratio(low[0])} (`{low[1]}`) to "
+                         f"{fmt_ratio(high[0])} (`{high[1]}`), {len(values)} cases")
 
 
 def machine(context, command):
