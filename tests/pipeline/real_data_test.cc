@@ -719,9 +719,12 @@ TEST_F(RealData, CharacterWideLevelsServeEveryClip) {
     size_t clip_count;
   };
   const Case cases[] = {{"characters/Fox.glb", {}, 3},
-                        {"characters/RobotExpressive.glb", {"Idle", "Punch", "Walking", "Jump"}, 4}};
+                        {"characters/RobotExpressive.glb", {"Idle", "Punch", "Walking", "Jump"}, 4},
+                        {"characters/CesiumMan.glb", {}, 1},
+                        {"characters/stormtrooper.dae", {}, 1}};
   for (const Case& c : cases) {
-    for (core::Variant variant : {core::Variant::kVP, core::Variant::kVPNOPD}) {
+    for (core::Variant variant : {core::Variant::kVP, core::Variant::kVPNO, core::Variant::kVPPD,
+                                  core::Variant::kVPNOPD}) {
       BakeRequest request;
       request.character = *io::LoadAssetFile(DataPath(c.file));
       for (const std::string& clip : c.clips) request.clips.push_back({nullptr, clip, ""});
