@@ -67,7 +67,7 @@ StatusOr<Score> ScoreLevel(const internal::PreparedData& probe, const ReducedSke
   auto solution = internal::SolveVariant(probe, level);
   if (!solution.ok()) return solution.status();
   const internal::DeltaView solved = solution->Delta(probe, level);
-  if (IsRigid(probe.settings.variant) && !probe.original_rotations) {
+  if (!internal::ReparentingIsCandidate(probe)) {
     const auto errors = decide(solved, bound_pct, internal::Figures::kQuadratic);
     if (!errors) return Score{std::nextafter(bound_pct, kInfinity), kInfinity, true};
     return Score{errors->max_vertex_error_pct, errors->mean_e, false};
@@ -75,8 +75,7 @@ StatusOr<Score> ScoreLevel(const internal::PreparedData& probe, const ReducedSke
   // The reparented level bounds what is written: the solution counts only within it.
   const LevelErrors base = *decide(reparented, kInfinity, internal::Figures::kAll);
   const auto own = decide(solved, std::min(bound_pct, base.max_vertex_error_pct), internal::Figures::kAll);
-  const bool solution_written = own && own->max_vertex_error_pct <= base.max_vertex_error_pct &&
-                                own->mean_vertex_error_pct <= base.mean_vertex_error_pct;
+  const bool solution_written = own && internal::NoWorseThan(*own, base);
   const LevelErrors& written = solution_written ? *own : base;
   if (written.max_vertex_error_pct > bound_pct) return Score{written.max_vertex_error_pct, kInfinity, true};
   return Score{written.max_vertex_error_pct, written.mean_e, false};

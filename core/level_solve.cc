@@ -185,14 +185,21 @@ void StoreMatrices(const MatrixXd& x, int m, int frames, RowMajorAffine34f* out)
   }
 }
 
-// Whether candidate figures are no worse than the reparented level's in the figures the
-// guarantee covers: the maximum and the mean vertex error.
-bool NoWorseThan(const LevelErrors& candidate, const LevelErrors& baseline) {
-  return candidate.max_vertex_error_pct <= baseline.max_vertex_error_pct &&
-         candidate.mean_vertex_error_pct <= baseline.mean_vertex_error_pct;
+}  // namespace
+
+namespace internal {
+
+bool ReparentingIsCandidate(const PreparedData& d) {
+  // Original matrices with scale or shear are no candidate of a rigid level.
+  return !IsRigid(d.settings.variant) || d.original_rotations;
 }
 
-}  // namespace
+bool NoWorseThan(const LevelErrors& candidate, const LevelErrors& reparented) {
+  return candidate.max_vertex_error_pct <= reparented.max_vertex_error_pct &&
+         candidate.mean_vertex_error_pct <= reparented.mean_vertex_error_pct;
+}
+
+}  // namespace internal
 
 std::span<const MotionClip> PreparedMotion::clips() const { return data_->clips; }
 
@@ -232,12 +239,11 @@ StatusOr<LevelErrors> PreparedMotion::BaselineErrors(const ReducedSkeleton& leve
 
 void PreparedMotion::KeepNoWorseThanReparenting(LevelResult& result) const {
   const internal::PreparedData& d = *data_;
-  // Original matrices with scale or shear are no candidate of a rigid level.
-  if (IsRigid(d.settings.variant) && !d.original_rotations) return;
+  if (!internal::ReparentingIsCandidate(d)) return;
   const int m = result.skeleton.kept_count();
   bool replaced = false;
   for (size_t c = 0; c < d.clips.size(); ++c) {
-    if (NoWorseThan(result.optimized.per_clip[c], result.baseline.per_clip[c])) continue;
+    if (internal::NoWorseThan(result.optimized.per_clip[c], result.baseline.per_clip[c])) continue;
     const MotionClip& clip = d.clips[c];
     for (int t = clip.first_frame; t < clip.first_frame + clip.frame_count; ++t) {
       for (int s = 0; s < m; ++s) {
@@ -291,7 +297,7 @@ Status PreparedMotion::LiftCoarserLevel(const LevelResult& coarser, LevelResult&
     LevelErrors figures = PartFigures(part, to, &x, solution_row, {});
     // Rigid levels keep their bones: a joint that rides on a coarser joint's matrix may
     // not stretch them.
-    if (!NoWorseThan(figures, finer.baseline.per_clip[c]) ||
+    if (!internal::NoWorseThan(figures, finer.baseline.per_clip[c]) ||
         figures.max_vertex_error_pct >= finer.optimized.per_clip[c].max_vertex_error_pct ||
         (IsRigid(d.settings.variant) &&
          figures.bone_length_drift_pct > internal::kRigidBoneLengthDriftPct)) {

@@ -24,4 +24,11 @@ struct VariantSolution {
 
 StatusOr<VariantSolution> SolveVariant(const PreparedData& d, const ReducedSkeleton& level);
 
+// The guarantee of PreparedMotion::KeepNoWorseThanReparenting: whether the reparented
+// level is a candidate for d's variant (always, but in a rigid variant only where the
+// original matrices are rotations), and whether a candidate's figures are no worse than
+// the reparented level's in what it covers, the maximum and the mean vertex error.
+bool ReparentingIsCandidate(const PreparedData& d);
+bool NoWorseThan(const LevelErrors& candidate, const LevelErrors& reparented);
+
 }  // namespace motionlod::core::internal
