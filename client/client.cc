@@ -404,9 +404,9 @@ Result<Level> Client::FetchClipLevel(const std::string& hash, const std::string&
     }
   }
   const std::string what = "GET /v1/levels/" + hash + "?clip=" + clip;
-  Result<HttpResponse> response =
-      SendExpecting({"GET", "/v1/levels/" + hash + "?clip=" + api::EncodeQueryValue(clip), {}, "", "", {}},
-                    {200}, what);
+  Result<HttpResponse> response = SendExpecting(
+      {"GET", "/v1/levels/" + hash + "?clip=" + api::EncodeQueryValue(clip), {}, "", "", {}}, {200},
+      what);
   if (!response.ok()) return response.error();
   ++fetch_stats_.downloads;
   Result<Level> level = Level::Decode(std::move(response->body));

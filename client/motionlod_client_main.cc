@@ -14,15 +14,14 @@
 // that failed, an output that could not be written).
 #include <unistd.h>
 
+#include <CLI/CLI.hpp>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <iostream>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
-
-#include <CLI/CLI.hpp>
-#include <nlohmann/json.hpp>
 
 #include "client/client.h"
 #include "client/level_selector.h"
@@ -102,7 +101,8 @@ void PrintLevels(const api::BakeInfo& bake) {
       std::printf("  clip '%s' (motion %s)\n", clip.animation.c_str(), clip.motion.c_str());
     } else {
       std::printf("  clip '%s' (motion %s): frames %d-%d at %g fps\n", clip.animation.c_str(),
-                  clip.motion.c_str(), clip.first_frame, clip.first_frame + clip.frames - 1, clip.fps);
+                  clip.motion.c_str(), clip.first_frame, clip.first_frame + clip.frames - 1,
+                  clip.fps);
     }
   }
   if (bake.levels.empty()) return;
@@ -235,7 +235,8 @@ int RunFetch(Client& client, const std::string& bake_id, double px, double budge
   if (!clip.empty() && std::none_of(bake->clips.begin(), bake->clips.end(),
                                     [&](const api::BakeClip& c) { return c.animation == clip; })) {
     std::string names;
-    for (const api::BakeClip& c : bake->clips) names += (names.empty() ? "'" : ", '") + c.animation + "'";
+    for (const api::BakeClip& c : bake->clips)
+      names += (names.empty() ? "'" : ", '") + c.animation + "'";
     std::cerr << "motionlod-client: error: --clip " << clip << ": bake " << bake_id
               << " has no such clip; its clips: " << names << "\n";
     return kExitBadInput;
@@ -258,11 +259,11 @@ int RunFetch(Client& client, const std::string& bake_id, double px, double budge
                    {"downloaded", downloaded},
                    {"path", out}});
   } else {
-    std::printf("level %d%s (%u joints, %u frames, max error %.3f%%): %zu bytes %s, written to %s\n",
-                level_index, clip.empty() ? "" : (", clip '" + clip + "'").c_str(),
-                level->level().kept_count(), level->level().frame_count(),
-                entry.max_vertex_error_pct, level->byte_size(),
-                downloaded ? "downloaded" : "from the cache", out.c_str());
+    std::printf(
+        "level %d%s (%u joints, %u frames, max error %.3f%%): %zu bytes %s, written to %s\n",
+        level_index, clip.empty() ? "" : (", clip '" + clip + "'").c_str(),
+        level->level().kept_count(), level->level().frame_count(), entry.max_vertex_error_pct,
+        level->byte_size(), downloaded ? "downloaded" : "from the cache", out.c_str());
   }
   return 0;
 }
@@ -345,7 +346,8 @@ int Main(int argc, char** argv) {
       fetch->add_option("--level", level_index, "a level index instead")->check(CLI::NonNegativeNumber);
   px_option->excludes(level_option);
   std::string fetch_clip;
-  fetch->add_option("--clip", fetch_clip, "only this clip's frames (an animation name of the bake)");
+  fetch->add_option("--clip", fetch_clip,
+                    "only this clip's frames (an animation name of the bake)");
   fetch->add_option("-o,--out", fetch_out, "file to write the level to")->required();
 
   try {

@@ -59,8 +59,8 @@ StatusOr<BakeRequest> ParseBakeRequest(std::string_view json_text) {
   if (body.is_discarded()) return InvalidArgument("the body is not valid JSON");
   if (!body.is_object()) return InvalidArgument("the body must be a JSON object");
   static const std::set<std::string> kKnown = {
-      "character", "motion",  "clips",         "ranking",            "levels", "all_levels",
-      "variant",   "fps",     "locked_joints", "keep_pd_translation"};
+      "character",  "motion",  "clips", "ranking",       "levels",
+      "all_levels", "variant", "fps",   "locked_joints", "keep_pd_translation"};
   for (const auto& [key, value] : body.items()) {
     if (!kKnown.count(key)) {
       return InvalidArgument("unknown field '" + key.substr(0, 64) +
@@ -86,24 +86,28 @@ StatusOr<BakeRequest> ParseBakeRequest(std::string_view json_text) {
   if (const auto clips = body.find("clips"); clips != body.end() && !clips->is_null()) {
     if (!clips->is_array())
       return InvalidArgument("'clips' must be an array of motion ids or animation names");
-    if (clips->size() > kMaxListEntries) return InvalidArgument("'clips' has more than 1024 entries");
+    if (clips->size() > kMaxListEntries)
+      return InvalidArgument("'clips' has more than 1024 entries");
     for (const json& clip : *clips) {
       if (!clip.is_string() || clip.get<std::string>().empty() ||
           clip.get<std::string>().size() > kMaxNameBytes) {
-        return InvalidArgument("'clips' entries must be motion ids or animation names (non-empty strings)");
+        return InvalidArgument(
+            "'clips' entries must be motion ids or animation names (non-empty strings)");
       }
       request.clips.push_back(clip.get<std::string>());
     }
     if (request.clips.empty()) {
-      return InvalidArgument("'clips' is empty: name at least one clip, or leave it out to bake "
-                             "every motion of the character");
+      return InvalidArgument(
+          "'clips' is empty: name at least one clip, or leave it out to bake "
+          "every motion of the character");
     }
   }
   if (!request.motion.empty() && !request.clips.empty()) {
     return InvalidArgument("give 'motion' (one clip) or 'clips' (several), not both");
   }
   if (const auto ranking = body.find("ranking"); ranking != body.end() && !ranking->is_null()) {
-    if (!ranking->is_string()) return InvalidArgument("'ranking' must be a string: greedy or paper");
+    if (!ranking->is_string())
+      return InvalidArgument("'ranking' must be a string: greedy or paper");
     request.ranking = ranking->get<std::string>();
     if (std::find(std::begin(kRankingNames), std::end(kRankingNames), request.ranking) ==
         std::end(kRankingNames)) {
@@ -275,12 +279,17 @@ void to_json(json& j, const BakeInfo& v) {
 }
 
 void to_json(json& j, const LevelChoice& v) {
-  j = json{{"bake", v.bake},           {"clip", OptionalText(v.clip)},
+  j = json{{"bake", v.bake},
+           {"clip", OptionalText(v.clip)},
            {"px", v.px},
-           {"budget_px", v.budget_px}, {"index", v.index},
-           {"joints", v.joints},       {"max_vertex_error_pct", v.max_vertex_error_pct},
-           {"error_px", v.error_px},   {"within_budget", v.within_budget},
-           {"hash", v.hash},           {"url", v.url},
+           {"budget_px", v.budget_px},
+           {"index", v.index},
+           {"joints", v.joints},
+           {"max_vertex_error_pct", v.max_vertex_error_pct},
+           {"error_px", v.error_px},
+           {"within_budget", v.within_budget},
+           {"hash", v.hash},
+           {"url", v.url},
            {"bytes", v.bytes}};
 }
 

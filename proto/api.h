@@ -144,8 +144,8 @@ struct BakeClip {
 struct BakeInfo {
   std::string id;
   std::string character;
-  std::string motion;  // the first clip's motion id
-  std::string animation;  // the first clip's animation
+  std::string motion;           // the first clip's motion id
+  std::string animation;        // the first clip's animation
   std::vector<BakeClip> clips;  // in frame order
   std::string ranking;
   BakeRequest request;  // as resolved (clips as motion ids, lists sorted)
@@ -172,7 +172,7 @@ struct LevelChoice {
   double error_px = 0;  // px * max_vertex_error_pct / 100: the worst deviation on screen
   bool within_budget = true;
   std::string hash;
-  std::string url;  // /v1/levels/{hash}, with ?clip= when a clip was asked for
+  std::string url;     // /v1/levels/{hash}, with ?clip= when a clip was asked for
   uint64_t bytes = 0;  // the file of every clip
 };
 

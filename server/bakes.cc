@@ -54,15 +54,18 @@ Result<const MotionRecord*> FindMotion(Store& store, const std::vector<MotionRec
                  field + ": several motions are named '" + name + "': give a motion id");
   }
   std::string available;
-  for (const MotionRecord& m : motions) available += (available.empty() ? "'" : ", '") + m.animation + "'";
-  return Error(ErrorKind::kUnprocessable, field + ": the character has no animation named '" + name +
-                                              "'" + (available.empty() ? "" : "; available: " + available));
+  for (const MotionRecord& m : motions)
+    available += (available.empty() ? "'" : ", '") + m.animation + "'";
+  return Error(ErrorKind::kUnprocessable,
+               field + ": the character has no animation named '" + name + "'" +
+                   (available.empty() ? "" : "; available: " + available));
 }
 
 // The motions a request bakes, in order: `motion`, the `clips`, or every motion of the
 // character. Each once, and no two of the same animation name (the levels' clips are
 // addressed by name).
-Result<std::vector<const MotionRecord*>> ResolveClips(Store& store, const CharacterRecord& character,
+Result<std::vector<const MotionRecord*>> ResolveClips(Store& store,
+                                                      const CharacterRecord& character,
                                                       const std::vector<MotionRecord>& motions,
                                                       const api::BakeRequest& request) {
   std::vector<const MotionRecord*> clips;
@@ -72,7 +75,8 @@ Result<std::vector<const MotionRecord*>> ResolveClips(Store& store, const Charac
     clips.push_back(*motion);
   } else if (!request.clips.empty()) {
     for (size_t c = 0; c < request.clips.size(); ++c) {
-      auto motion = FindMotion(store, motions, request.clips[c], "'clips'[" + std::to_string(c) + "]");
+      auto motion =
+          FindMotion(store, motions, request.clips[c], "'clips'[" + std::to_string(c) + "]");
       if (!motion.ok()) return motion.error();
       clips.push_back(*motion);
     }
@@ -88,13 +92,15 @@ Result<std::vector<const MotionRecord*>> ResolveClips(Store& store, const Charac
     for (size_t before = 0; before < c; ++before) {
       if (clips[before] == clips[c]) {
         return Error(ErrorKind::kUnprocessable, "motion " + clips[c]->id + " ('" +
-                                                    clips[c]->animation + "') is named twice in 'clips'");
+                                                    clips[c]->animation +
+                                                    "') is named twice in 'clips'");
       }
       if (clips[before]->animation == clips[c]->animation) {
-        return Error(ErrorKind::kUnprocessable,
-                     "two clips are named '" + clips[c]->animation + "' (motions " + clips[before]->id +
-                         " and " + clips[c]->id +
-                         "): a bake's clips need distinct animation names; name the clips to bake in 'clips'");
+        return Error(ErrorKind::kUnprocessable, "two clips are named '" + clips[c]->animation +
+                                                    "' (motions " + clips[before]->id + " and " +
+                                                    clips[c]->id +
+                                                    "): a bake's clips need distinct animation "
+                                                    "names; name the clips to bake in 'clips'");
       }
     }
   }
@@ -229,7 +235,8 @@ Result<Created<api::JobStatus>> Bakes::Submit(const api::BakeRequest& request) {
     return queued.error();
   }
   std::string names;
-  for (const MotionRecord* motion : *clips) names += (names.empty() ? "'" : ", '") + motion->animation + "'";
+  for (const MotionRecord* motion : *clips)
+    names += (names.empty() ? "'" : ", '") + motion->animation + "'";
   spdlog::info("bake {} queued: character {}, clips {}", key.id, c.id, names);
   auto status = jobs_.Get(key.id);
   if (!status.ok()) return status.error();

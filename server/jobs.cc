@@ -247,7 +247,8 @@ void Jobs::Run(const std::string& id) {
       if (!file) {
         auto motion_asset = context_.LoadSource(m.source_id, m.files);
         if (!motion_asset.ok())
-          return fail(StatusCodeName(motion_asset.status().code()), motion_asset.status().message());
+          return fail(StatusCodeName(motion_asset.status().code()),
+                      motion_asset.status().message());
         file = *motion_asset;
       }
       clip.motion = file;

@@ -22,7 +22,8 @@ constexpr size_t kLevelTableEntries = 4096;
 template <typename Names, typename NameOf>
 std::string ListNames(const Names& items, NameOf name_of) {
   std::string list;
-  for (const auto& item : items) list += (list.empty() ? "'" : ", '") + std::string(name_of(item)) + "'";
+  for (const auto& item : items)
+    list += (list.empty() ? "'" : ", '") + std::string(name_of(item)) + "'";
   return list;
 }
 
@@ -35,8 +36,10 @@ bool HasClip(const std::vector<api::BakeClip>& clips, const std::string& name) {
                      [&](const api::BakeClip& clip) { return clip.animation == name; });
 }
 
-ServiceError NoSuchClip(const std::string& what, const std::string& clip, const std::string& names) {
-  return Error(ErrorKind::kNotFound, what + " has no clip named '" + clip + "'; its clips: " + names);
+ServiceError NoSuchClip(const std::string& what, const std::string& clip,
+                        const std::string& names) {
+  return Error(ErrorKind::kNotFound,
+               what + " has no clip named '" + clip + "'; its clips: " + names);
 }
 
 }  // namespace
@@ -147,7 +150,8 @@ Result<api::LevelChoice> Levels::Choose(const std::string& bake_id, double px, d
   choice.error_px = px * entry.max_vertex_error_pct / 100.0;
   choice.within_budget = choice.error_px <= budget_px;
   choice.hash = entry.hash;
-  choice.url = "/v1/levels/" + entry.hash + (clip.empty() ? "" : "?clip=" + api::EncodeQueryValue(clip));
+  choice.url =
+      "/v1/levels/" + entry.hash + (clip.empty() ? "" : "?clip=" + api::EncodeQueryValue(clip));
   choice.bytes = entry.bytes;
   return choice;
 }
@@ -162,12 +166,16 @@ Result<Levels::LevelFile> Levels::Get(const std::string& hash, const std::string
     file.key = io::Sha256Hex("motionlod-level-clip/1\nlevel " + hash + "\nclip " +
                              std::to_string(clip.size()) + ":" + clip + "\n");
   }
-  if ((file.bytes = context_.cache.Get(file.key))) return file;
   LevelCache::Bytes whole = context_.cache.Get(hash);
   if (!whole) {
     auto size = context_.store->LevelBytes(hash);
     if (!size.ok()) return Internal(size.status());
     if (!size->has_value()) return Error(ErrorKind::kNotFound, "no level " + hash);
+  }
+  // A clip's file is served only while its level is (a deleted bake's levels leave the
+  // cache and the store; the clips' files made from them cannot be listed to follow).
+  if (!clip.empty() && (file.bytes = context_.cache.Get(file.key))) return file;
+  if (!whole) {
     auto bytes = context_.blobs->Get(hash);
     if (!bytes.ok()) {
       if (bytes.status().code() == StatusCode::kNotFound)
@@ -186,8 +194,9 @@ Result<Levels::LevelFile> Levels::Get(const std::string& hash, const std::string
   if (!view.ok()) return Internal(view.status());
   const int c = view->FindClip(clip);
   if (c < 0) {
-    return NoSuchClip("level " + hash, clip,
-                      ListNames(view->clips(), [](const proto::ClipView& one) { return one.name; }));
+    return NoSuchClip(
+        "level " + hash, clip,
+        ListNames(view->clips(), [](const proto::ClipView& one) { return one.name; }));
   }
   auto one_clip = proto::ExtractLevelClip(*view, 0, static_cast<uint32_t>(c));
   if (!one_clip.ok()) return Internal(one_clip.status());
@@ -228,8 +237,11 @@ Result<Levels::GltfFile> Levels::GetGltf(const std::string& bake_id, int joints,
   auto table = GetTable(bake.value());
   if (!table.ok()) return Internal(table.status());
   const std::vector<api::BakeClip>& clips = (*table)->clips;
-  if (!clip.empty() && !HasClip(clips, clip)) return NoSuchClip("bake " + bake_id, clip, ClipNames(clips));
-  const std::string animation = !clip.empty() ? clip : clips.empty() ? std::string() : clips.front().animation;
+  if (!clip.empty() && !HasClip(clips, clip))
+    return NoSuchClip("bake " + bake_id, clip, ClipNames(clips));
+  const std::string animation = !clip.empty()   ? clip
+                                : clips.empty() ? std::string()
+                                                : clips.front().animation;
   GltfFile file;
   // The version after "motionlod-gltf/" changes whenever the exporter writes other bytes.
   file.key =

@@ -517,7 +517,8 @@ StatusOr<bool> Store::InsertBakeAndJob(const BakeRecord& bake, const JobRecord& 
 Status Store::ReadClipMotions(BakeRecord& bake) {
   Statement select(db_, "SELECT motion_id FROM bake_clips WHERE bake_id = ? ORDER BY idx");
   select.Bind(1, bake.id);
-  auto motions = select.ReadAll("read bake clips", [](const Statement& row) { return row.Text(0); });
+  auto motions =
+      select.ReadAll("read bake clips", [](const Statement& row) { return row.Text(0); });
   if (!motions.ok()) return motions.status();
   bake.clip_motions = std::move(*motions);
   return Status::Ok();

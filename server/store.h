@@ -53,7 +53,7 @@ struct MotionRecord {
 struct BakeRecord {
   std::string id;
   std::string character_id;
-  std::string motion_id;                // the first clip's
+  std::string motion_id;                  // the first clip's
   std::vector<std::string> clip_motions;  // every clip's motion id, in the bake's order
   std::string request_json;  // the resolved api::BakeRequest
   int64_t created_ms = 0;

@@ -119,7 +119,8 @@ TEST_F(ClientCli, BakesSeveralClipsAndFetchesOneClipsLevel) {
   const std::string bake_id = info.value("id", "");
 
   // --clips a,b names the same clips: the same request, but for the ranking.
-  const CliRun greedy = Cli(Server() + "--json bake " + id + " --clips Walking_A,Running_A --levels 12,6 --no-wait");
+  const CliRun greedy =
+      Cli(Server() + "--json bake " + id + " --clips Walking_A,Running_A --levels 12,6 --no-wait");
   ASSERT_EQ(greedy.exit_code, 0) << greedy.err;
   EXPECT_NE(json::parse(greedy.out, nullptr, false).value("id", ""), bake_id);
 
@@ -131,8 +132,8 @@ TEST_F(ClientCli, BakesSeveralClipsAndFetchesOneClipsLevel) {
 
   const fs::path cache = daemon_->dir() / "cache";
   const fs::path out = daemon_->dir() / "running.mlod";
-  const std::string fetch = Server() + "--json --cache-dir " + cache.string() + " fetch " + bake_id +
-                            " --px 120 --clip Running_A -o " + out.string();
+  const std::string fetch = Server() + "--json --cache-dir " + cache.string() + " fetch " +
+                            bake_id + " --px 120 --clip Running_A -o " + out.string();
   const CliRun first = Cli(fetch);
   ASSERT_EQ(first.exit_code, 0) << first.err;
   EXPECT_EQ(json::parse(first.out, nullptr, false).value("clip", ""), "Running_A");
@@ -146,9 +147,11 @@ TEST_F(ClientCli, BakesSeveralClipsAndFetchesOneClipsLevel) {
   EXPECT_EQ(level->level().frame_count(), info["clips"][1]["frames"].get<uint32_t>());
   const CliRun second = Cli(fetch);
   ASSERT_EQ(second.exit_code, 0) << second.err;
-  EXPECT_FALSE(json::parse(second.out, nullptr, false).value("downloaded", true)) << "from the cache";
+  EXPECT_FALSE(json::parse(second.out, nullptr, false).value("downloaded", true))
+      << "from the cache";
 
-  const CliRun unknown = Cli(Server() + "fetch " + bake_id + " --px 120 --clip Moonwalk -o " + out.string());
+  const CliRun unknown =
+      Cli(Server() + "fetch " + bake_id + " --px 120 --clip Moonwalk -o " + out.string());
   EXPECT_EQ(unknown.exit_code, 2);
   EXPECT_NE(unknown.err.find("'Walking_A', 'Running_A'"), std::string::npos) << unknown.err;
   const CliRun both = Cli(Server() + "bake " + id + " --motion Walking_A --clip Running_A");

@@ -8,8 +8,8 @@
 #include <fstream>
 #include <numbers>
 
-#include "proto/level_selection.h"
 #include "client/level_selector.h"
+#include "proto/level_selection.h"
 #include "tests/client/fixture.h"
 
 namespace motionlod::client::testing {

@@ -1,10 +1,10 @@
 // The bake request's clips and ranking as the daemon parses them, and the query encoding
 // of a clip's name.
+#include "proto/api.h"
+
 #include <gtest/gtest.h>
 
 #include <string>
-
-#include "proto/api.h"
 
 namespace motionlod::proto::api {
 namespace {
@@ -29,8 +29,9 @@ TEST(ParseBakeRequest, TakesClipsInOrderAndTheRanking) {
 
 TEST(ParseBakeRequest, RefusesBadClipsAndRankingsNamingTheField) {
   for (const char* fields :
-       {R"("motion":"Walk","clips":["Run"])", R"("clips":[])", R"("clips":"Walk")", R"("clips":[""])",
-        R"("clips":[1])", R"("ranking":"best")", R"("ranking":null,"clips":{})", R"("ranking":2)"}) {
+       {R"("motion":"Walk","clips":["Run"])", R"("clips":[])", R"("clips":"Walk")",
+        R"("clips":[""])", R"("clips":[1])", R"("ranking":"best")", R"("ranking":null,"clips":{})",
+        R"("ranking":2)"}) {
     auto request = ParseBakeRequest(WithCharacter(fields));
     ASSERT_FALSE(request.ok()) << fields;
     EXPECT_EQ(request.status().code(), StatusCode::kInvalidArgument);
@@ -42,7 +43,8 @@ TEST(ParseBakeRequest, RefusesBadClipsAndRankingsNamingTheField) {
 }
 
 TEST(ParseBakeRequest, ARequestSerialisesToJsonThatParsesToItself) {
-  for (const char* fields : {"", R"("motion":"Walk")", R"("clips":["Run","Walk"],"ranking":"paper")"}) {
+  for (const char* fields :
+       {"", R"("motion":"Walk")", R"("clips":["Run","Walk"],"ranking":"paper")"}) {
     auto request = ParseBakeRequest(WithCharacter(fields));
     ASSERT_TRUE(request.ok()) << fields;
     const std::string text = nlohmann::json(*request).dump();

@@ -123,7 +123,8 @@ TEST_F(ClipBakes, EveryClipGetsItsOwnFramesOfTheSameReducedSkeleton) {
   for (const std::string& name : kClips) {
     const std::string choose = "/v1/bakes/" + id + "/level?px=100&clip=" + name;
     auto choice = client_->Get(choose.c_str(), {{"Accept", "application/json"}});
-    auto whole = client_->Get(("/v1/bakes/" + id + "/level?px=100").c_str(), {{"Accept", "application/json"}});
+    auto whole = client_->Get(("/v1/bakes/" + id + "/level?px=100").c_str(),
+                              {{"Accept", "application/json"}});
     ASSERT_TRUE(choice && whole);
     ASSERT_EQ(choice->status, 200) << choice->body;
     EXPECT_EQ(Json(choice)["clip"], name);
@@ -157,6 +158,12 @@ TEST_F(ClipBakes, EveryClipGetsItsOwnFramesOfTheSameReducedSkeleton) {
     ExpectProblem(client_->Get(path.c_str()), 404, "'Walking_A', 'Running_A', 'Jump_Start'");
   }
   ExpectProblem(client_->Get(("/v1/levels/" + hash + "?clip=").c_str()), 400, "clip");
+
+  // A deleted bake's clip files go with its levels (though made and cached before).
+  const std::string clip_url = "/v1/levels/" + hash + "?clip=Running_A";
+  ASSERT_EQ(client_->Get(clip_url.c_str())->status, 200);
+  ASSERT_EQ(client_->Delete(("/v1/bakes/" + id).c_str())->status, 204);
+  ExpectProblem(client_->Get(clip_url.c_str()), 404);
 }
 
 TEST_F(ClipBakes, TheRequestNamesTheClipsTheRankingAndByDefaultEveryMotion) {
@@ -165,18 +172,22 @@ TEST_F(ClipBakes, TheRequestNamesTheClipsTheRankingAndByDefaultEveryMotion) {
   ASSERT_TRUE(every.is_object());
   EXPECT_EQ(every["request"]["clips"], motion_ids_);
   ASSERT_EQ(every["clips"].size(), animations_.size());
-  for (size_t c = 0; c < animations_.size(); ++c) EXPECT_EQ(every["clips"][c]["animation"], animations_[c]);
+  for (size_t c = 0; c < animations_.size(); ++c)
+    EXPECT_EQ(every["clips"][c]["animation"], animations_[c]);
   EXPECT_EQ(client_->Delete(("/v1/bakes/" + every["id"].get<std::string>()).c_str())->status, 204);
 
   // The bake id covers the clips (in order) and the ranking.
-  const json greedy = Bake({{"character", kSampleId}, {"clips", {"Walking_A", "Running_A"}}, {"levels", {6}}}, false);
+  const json greedy = Bake(
+      {{"character", kSampleId}, {"clips", {"Walking_A", "Running_A"}}, {"levels", {6}}}, false);
   const json paper = Bake({{"character", kSampleId},
                            {"clips", {"Walking_A", "Running_A"}},
                            {"levels", {6}},
                            {"ranking", "paper"}},
                           false);
-  const json swapped = Bake({{"character", kSampleId}, {"clips", {"Running_A", "Walking_A"}}, {"levels", {6}}}, false);
-  const json one = Bake({{"character", kSampleId}, {"motion", "Walking_A"}, {"levels", {6}}}, false);
+  const json swapped = Bake(
+      {{"character", kSampleId}, {"clips", {"Running_A", "Walking_A"}}, {"levels", {6}}}, false);
+  const json one =
+      Bake({{"character", kSampleId}, {"motion", "Walking_A"}, {"levels", {6}}}, false);
   EXPECT_EQ(paper["ranking"], "paper");
   EXPECT_EQ(paper["request"]["ranking"], "paper");
   EXPECT_EQ(greedy["ranking"], "greedy");
@@ -185,7 +196,8 @@ TEST_F(ClipBakes, TheRequestNamesTheClipsTheRankingAndByDefaultEveryMotion) {
   std::sort(ids.begin(), ids.end());
   EXPECT_EQ(std::unique(ids.begin(), ids.end()), ids.end()) << "four requests, four bakes";
   // `motion` is the one clip `clips` names alone: the same bake.
-  auto same = SubmitBake(*client_, {{"character", kSampleId}, {"clips", {MotionId("Walking_A")}}, {"levels", {6}}});
+  auto same = SubmitBake(
+      *client_, {{"character", kSampleId}, {"clips", {MotionId("Walking_A")}}, {"levels", {6}}});
   ASSERT_TRUE(same);
   EXPECT_EQ(same->status, 200) << same->body;
   EXPECT_EQ(Json(same)["id"], one["id"]);
@@ -199,14 +211,18 @@ TEST_F(ClipBakes, BadClipsAndRankingsAreProblems) {
   ExpectProblem(post({{"character", kSampleId}, {"ranking", 1}}), 400, "ranking");
   ExpectProblem(post({{"character", kSampleId}, {"motion", "Walking_A"}, {"clips", {"Running_A"}}}),
                 400, "not both");
-  ExpectProblem(post({{"character", kSampleId}, {"clips", json::array()}}), 400, "'clips' is empty");
-  ExpectProblem(post({{"character", kSampleId}, {"clips", "Walking_A"}}), 400, "'clips' must be an array");
-  ExpectProblem(post({{"character", kSampleId}, {"clips", {"Walking_A", ""}}}), 400, "'clips' entries");
+  ExpectProblem(post({{"character", kSampleId}, {"clips", json::array()}}), 400,
+                "'clips' is empty");
+  ExpectProblem(post({{"character", kSampleId}, {"clips", "Walking_A"}}), 400,
+                "'clips' must be an array");
+  ExpectProblem(post({{"character", kSampleId}, {"clips", {"Walking_A", ""}}}), 400,
+                "'clips' entries");
   ExpectProblem(post({{"character", kSampleId}, {"clips", {"Walking_A", "Moonwalk"}}}), 422,
                 "'clips'[1]: the character has no animation named 'Moonwalk'");
-  ExpectProblem(post({{"character", kSampleId}, {"clips", {"Walking_A", MotionId("Walking_A")}}}), 422,
-                "named twice");
-  ExpectProblem(post({{"character", kSampleId}, {"clips", {std::string(64, 'f')}}}), 404, "no motion");
+  ExpectProblem(post({{"character", kSampleId}, {"clips", {"Walking_A", MotionId("Walking_A")}}}),
+                422, "named twice");
+  ExpectProblem(post({{"character", kSampleId}, {"clips", {std::string(64, 'f')}}}), 404,
+                "no motion");
 }
 
 }  // namespace
