@@ -1,7 +1,6 @@
 #include "client/client.h"
 
 #include <algorithm>
-#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <fstream>
@@ -30,22 +29,6 @@ Result<T> ParseBody(const std::string& body, const std::string& what) {
   return std::move(*parsed);
 }
 
-// RFC 3986 unreserved characters stay, everything else is %XX.
-std::string UrlEncode(std::string_view text) {
-  static constexpr char kHex[] = "0123456789ABCDEF";
-  std::string out;
-  for (unsigned char c : text) {
-    if (std::isalnum(c) || c == '-' || c == '_' || c == '.' || c == '~') {
-      out += static_cast<char>(c);
-    } else {
-      out += '%';
-      out += kHex[c >> 4];
-      out += kHex[c & 15];
-    }
-  }
-  return out;
-}
-
 std::string FormatNumber(double value) {
   std::ostringstream text;
   text.precision(17);
@@ -65,9 +48,23 @@ bool Terminal(const api::JobStatus& job) {
   return job.state == "succeeded" || job.state == "failed";
 }
 
-// The level cache: <dir>/<hash>.mlod. Entries are immutable (named by their content) and
-// written atomically, so a reader never sees a partial file.
+// The level cache: <dir>/<hash>.mlod, and <dir>/<hash>.<clip's name in hex>.mlod for one
+// clip's frames of it. Entries are immutable (named by their content) and written
+// atomically, so a reader never sees a partial file.
 fs::path CachePath(const fs::path& dir, const std::string& hash) { return dir / (hash + ".mlod"); }
+
+// A clip's name longer than this is not cached (its file name would be too long).
+constexpr size_t kMaxCachedClipNameBytes = 64;
+
+fs::path ClipCachePath(const fs::path& dir, const std::string& hash, std::string_view clip) {
+  static constexpr char kHex[] = "0123456789abcdef";
+  std::string name = hash + ".";
+  for (const unsigned char c : clip) {
+    name += kHex[c >> 4];
+    name += kHex[c & 15];
+  }
+  return dir / (name + ".mlod");
+}
 
 std::optional<std::string> ReadCached(const fs::path& path) {
   std::ifstream in(path, std::ios::binary);
@@ -232,7 +229,7 @@ std::optional<Error> BuildUpload(const std::vector<UploadFile>& files, std::stri
   request.method = "POST";
   if (files.size() == 1) {
     const char separator = target.find('?') == std::string::npos ? '?' : '&';
-    request.target = target + separator + "filename=" + UrlEncode(files[0].name);
+    request.target = target + separator + "filename=" + api::EncodeQueryValue(files[0].name);
     request.content_type = "application/octet-stream";
     request.body = files[0].bytes;
     return std::nullopt;
@@ -285,6 +282,7 @@ Result<api::JobStatus> Client::SubmitBake(const api::BakeRequest& bake) {
   json body = bake;
   // Only what the caller set: the daemon fills in the defaults (and resolves the motion).
   if (bake.motion.empty()) body.erase("motion");
+  if (bake.clips.empty()) body.erase("clips");
   return Call<api::JobStatus>(
       {"POST", "/v1/bakes", {}, "application/json", body.dump(), {}}, {200, 202});
 }
@@ -340,14 +338,15 @@ Result<api::BakeInfo> Client::GetBake(const std::string& bake_id) {
 }
 
 Result<api::LevelChoice> Client::ChooseLevel(const std::string& bake_id, double px,
-                                             double budget_px) {
+                                             double budget_px, const std::string& clip) {
   if (auto error = CheckId("bake", bake_id)) return *error;
   if (!std::isfinite(px) || !std::isfinite(budget_px)) {
     return MakeError(ErrorKind::kInvalidArgument, "px and budget must be finite numbers");
   }
   return Call<api::LevelChoice>({"GET",
                                  "/v1/bakes/" + bake_id + "/level?px=" + FormatNumber(px) +
-                                     "&budget=" + FormatNumber(budget_px),
+                                     "&budget=" + FormatNumber(budget_px) +
+                                     (clip.empty() ? "" : "&clip=" + api::EncodeQueryValue(clip)),
                                  {{"Accept", "application/json"}},
                                  "",
                                  "",
@@ -355,8 +354,9 @@ Result<api::LevelChoice> Client::ChooseLevel(const std::string& bake_id, double 
                                 {200});
 }
 
-Result<Level> Client::FetchLevel(const std::string& hash) {
+Result<Level> Client::FetchLevel(const std::string& hash, const std::string& clip) {
   if (auto error = CheckId("level", hash)) return *error;
+  if (!clip.empty()) return FetchClipLevel(hash, clip);
   const bool caching = !options_.cache_dir.empty();
   std::optional<std::string> cached;
   if (caching) cached = ReadCached(CachePath(options_.cache_dir, hash));
@@ -384,6 +384,35 @@ Result<Level> Client::FetchLevel(const std::string& hash) {
   if (caching) {
     if (auto error = WriteFileAtomically(CachePath(options_.cache_dir, hash), level->level_set().bytes()))
       return *error;
+    ++fetch_stats_.cache_writes;
+  }
+  return level;
+}
+
+Result<Level> Client::FetchClipLevel(const std::string& hash, const std::string& clip) {
+  const bool caching = !options_.cache_dir.empty() && clip.size() <= kMaxCachedClipNameBytes;
+  const fs::path path = caching ? ClipCachePath(options_.cache_dir, hash, clip) : fs::path();
+  if (caching) {
+    if (std::optional<std::string> cached = ReadCached(path)) {
+      Result<Level> level = Level::Decode(std::move(*cached));
+      if (level.ok()) {
+        ++fetch_stats_.cache_hits;
+        return level;
+      }
+      std::error_code ignored;  // damaged on disk: download it again
+      fs::remove(path, ignored);
+    }
+  }
+  const std::string what = "GET /v1/levels/" + hash + "?clip=" + clip;
+  Result<HttpResponse> response = SendExpecting(
+      {"GET", "/v1/levels/" + hash + "?clip=" + api::EncodeQueryValue(clip), {}, "", "", {}}, {200},
+      what);
+  if (!response.ok()) return response.error();
+  ++fetch_stats_.downloads;
+  Result<Level> level = Level::Decode(std::move(response->body));
+  if (!level.ok()) return MakeError(ErrorKind::kDataLoss, what + ": " + level.error().message);
+  if (caching) {
+    if (auto error = WriteFileAtomically(path, level->level_set().bytes())) return *error;
     ++fetch_stats_.cache_writes;
   }
   return level;

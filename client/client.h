@@ -79,6 +79,7 @@ using ProgressCallback = std::function<void(const proto::api::JobStatus&)>;
 struct FetchStats {
   int downloads = 0;     // level bodies received (200)
   int revalidated = 0;   // cached levels confirmed by 304 (no body)
+  int cache_hits = 0;    // one clip's levels read from the cache without a request
   int cache_writes = 0;  // level files written to the cache
 };
 
@@ -111,12 +112,17 @@ class Client {
   Result<proto::api::BakeInfo> GetBake(const std::string& bake_id);
 
   // The daemon's choice for a character `px` pixels tall (GET /v1/bakes/{id}/level as
-  // JSON). LevelSelector makes the same choice locally, with hysteresis.
+  // JSON), by the figures over every clip; `clip` (an animation name of the bake) puts
+  // ?clip= in the choice's url. LevelSelector makes the same choice locally, with
+  // hysteresis.
   Result<proto::api::LevelChoice> ChooseLevel(const std::string& bake_id, double px,
-                                              double budget_px = 1.0);
+                                              double budget_px = 1.0, const std::string& clip = "");
   // GET /v1/levels/{hash}, through the disk cache: a cached file is revalidated with
   // If-None-Match (304: nothing is downloaded again), a new one is stored atomically.
-  Result<Level> FetchLevel(const std::string& hash);
+  // With `clip` (an animation name of the bake): ?clip=, the level with only that clip's
+  // frames; its cached file (clip names up to 64 bytes) is used without asking the
+  // daemon, since what the URL names never changes.
+  Result<Level> FetchLevel(const std::string& hash, const std::string& clip = "");
 
   const FetchStats& fetch_stats() const { return fetch_stats_; }
   const ClientOptions& options() const { return options_; }
@@ -131,6 +137,7 @@ class Client {
                                      const std::string& what);
   template <typename T>
   Result<T> Call(HttpRequest request, std::initializer_list<int> expected);
+  Result<Level> FetchClipLevel(const std::string& hash, const std::string& clip);
 
   ClientOptions options_;
   std::unique_ptr<HttpConnection> connection_;

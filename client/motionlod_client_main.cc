@@ -2,25 +2,26 @@
 //   motionlod-client [--server URL] [--api-key KEY] [--cache-dir DIR] [--json] COMMAND
 //     upload FILE [FILE...] [--for CHARACTER]   a character (a .gltf with its .bin), or
 //                                                with --for a motion file for it
-//     bake CHARACTER [--motion M] [--levels 17,12,6 | --all-levels] [--variant V]
-//                    [--fps F] [--lock J,...] [--no-wait]
+//     bake CHARACTER [--motion M | --clip C... | --clips C,C] [--ranking greedy|paper]
+//                    [--levels 17,12,6 | --all-levels] [--variant V] [--fps F]
+//                    [--lock J,...] [--no-wait]
 //     status JOB [--wait]
 //     levels BAKE
-//     fetch BAKE (--px PX [--budget B] | --level L) -o FILE
+//     fetch BAKE (--px PX [--budget B] | --level L) [--clip NAME] -o FILE
 // Human-readable output on stdout, or one JSON document with --json; progress and errors
 // on stderr. Exit codes: 0 success; 2 bad input (usage, a file that cannot be read, a
 // request the daemon refused with 4xx); 1 anything else (daemon unreachable, 5xx, a bake
 // that failed, an output that could not be written).
 #include <unistd.h>
 
+#include <CLI/CLI.hpp>
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <iostream>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
-
-#include <CLI/CLI.hpp>
-#include <nlohmann/json.hpp>
 
 #include "client/client.h"
 #include "client/level_selector.h"
@@ -92,8 +93,18 @@ std::string PixelRange(double px_min, const std::optional<double>& px_max) {
 }
 
 void PrintLevels(const api::BakeInfo& bake) {
-  std::printf("bake %s: %s, %d frames at %g fps, variant %s\n", bake.id.c_str(),
-              bake.state.c_str(), bake.frames, bake.fps, bake.variant.c_str());
+  std::printf("bake %s: %s, %d frames at %g fps, variant %s, ranking %s\n", bake.id.c_str(),
+              bake.state.c_str(), bake.frames, bake.fps, bake.variant.c_str(),
+              bake.ranking.c_str());
+  for (const api::BakeClip& clip : bake.clips) {
+    if (bake.levels.empty()) {
+      std::printf("  clip '%s' (motion %s)\n", clip.animation.c_str(), clip.motion.c_str());
+    } else {
+      std::printf("  clip '%s' (motion %s): frames %d-%d at %g fps\n", clip.animation.c_str(),
+                  clip.motion.c_str(), clip.first_frame, clip.first_frame + clip.frames - 1,
+                  clip.fps);
+    }
+  }
   if (bake.levels.empty()) return;
   std::printf("%5s %6s %10s %10s %17s  %s\n", "level", "joints", "max err %", "px (1 px)",
               "chosen for px", "hash");
@@ -204,7 +215,7 @@ int RunLevels(Client& client, const std::string& bake_id, bool as_json) {
 }
 
 int RunFetch(Client& client, const std::string& bake_id, double px, double budget, int level_index,
-             const std::string& out, bool as_json) {
+             const std::string& clip, const std::string& out, bool as_json) {
   auto bake = client.GetBake(bake_id);
   if (!bake.ok()) return Fail(bake.error());
   if (bake->levels.empty()) {
@@ -221,14 +232,24 @@ int RunFetch(Client& client, const std::string& bake_id, double px, double budge
               << bake->levels.size() << " levels\n";
     return kExitBadInput;
   }
+  if (!clip.empty() && std::none_of(bake->clips.begin(), bake->clips.end(),
+                                    [&](const api::BakeClip& c) { return c.animation == clip; })) {
+    std::string names;
+    for (const api::BakeClip& c : bake->clips)
+      names += (names.empty() ? "'" : ", '") + c.animation + "'";
+    std::cerr << "motionlod-client: error: --clip " << clip << ": bake " << bake_id
+              << " has no such clip; its clips: " << names << "\n";
+    return kExitBadInput;
+  }
   const api::LevelEntry& entry = bake->levels[static_cast<size_t>(level_index)];
   const int downloads_before = client.fetch_stats().downloads;
-  auto level = client.FetchLevel(entry.hash);
+  auto level = client.FetchLevel(entry.hash, clip);
   if (!level.ok()) return Fail(level.error());
   const bool downloaded = client.fetch_stats().downloads > downloads_before;
   if (auto error = WriteFileAtomically(out, level->level_set().bytes())) return Fail(*error);
   if (as_json) {
     PrintJson(json{{"bake", bake_id},
+                   {"clip", clip.empty() ? json(nullptr) : json(clip)},
                    {"index", level_index},
                    {"joints", level->level().kept_count()},
                    {"frames", level->level().frame_count()},
@@ -238,10 +259,11 @@ int RunFetch(Client& client, const std::string& bake_id, double px, double budge
                    {"downloaded", downloaded},
                    {"path", out}});
   } else {
-    std::printf("level %d (%u joints, %u frames, max error %.3f%%): %zu bytes %s, written to %s\n",
-                level_index, level->level().kept_count(), level->level().frame_count(),
-                entry.max_vertex_error_pct, level->byte_size(),
-                downloaded ? "downloaded" : "from the cache", out.c_str());
+    std::printf(
+        "level %d%s (%u joints, %u frames, max error %.3f%%): %zu bytes %s, written to %s\n",
+        level_index, clip.empty() ? "" : (", clip '" + clip + "'").c_str(),
+        level->level().kept_count(), level->level().frame_count(), entry.max_vertex_error_pct,
+        level->byte_size(), downloaded ? "downloaded" : "from the cache", out.c_str());
   }
   return 0;
 }
@@ -278,7 +300,16 @@ int Main(int argc, char** argv) {
   bool no_wait = false;
   CLI::App* bake = app.add_subcommand("bake", "bake a character's motion and wait for it");
   bake->add_option("CHARACTER", bake_request.character, "character id")->required();
-  bake->add_option("--motion", bake_request.motion, "motion id or animation name (default: the first)");
+  auto* motion_option = bake->add_option("--motion", bake_request.motion,
+                                         "one clip: a motion id or an animation name");
+  bake->add_option("--clip,--clips", bake_request.clips,
+                   "clips baked together, in order: motion ids or animation names (repeat, or "
+                   "a,b; default with no --motion: every motion of the character)")
+      ->delimiter(',')
+      ->excludes(motion_option);
+  bake->add_option("--ranking", bake_request.ranking, "joint ranking: greedy or paper")
+      ->check(CLI::IsMember({"greedy", "paper"}))
+      ->capture_default_str();
   auto* levels = bake->add_option("--levels", bake_request.levels, "kept joint counts, e.g. 17,12,6")
                      ->delimiter(',');
   bake->add_flag("--all-levels", bake_request.all_levels, "every level down to the root")->excludes(levels);
@@ -314,6 +345,9 @@ int Main(int argc, char** argv) {
   auto* level_option =
       fetch->add_option("--level", level_index, "a level index instead")->check(CLI::NonNegativeNumber);
   px_option->excludes(level_option);
+  std::string fetch_clip;
+  fetch->add_option("--clip", fetch_clip,
+                    "only this clip's frames (an animation name of the bake)");
   fetch->add_option("-o,--out", fetch_out, "file to write the level to")->required();
 
   try {
@@ -333,7 +367,7 @@ int Main(int argc, char** argv) {
   if (bake->parsed()) return RunBake(*client, bake_request, !no_wait, as_json);
   if (status->parsed()) return RunStatus(*client, job_id, status_wait, as_json);
   if (levels_command->parsed()) return RunLevels(*client, levels_bake, as_json);
-  return RunFetch(*client, fetch_bake, px, budget, level_index, fetch_out, as_json);
+  return RunFetch(*client, fetch_bake, px, budget, level_index, fetch_clip, fetch_out, as_json);
 }
 
 }  // namespace

@@ -36,18 +36,36 @@ bool IsContentId(std::string_view text) {
          });
 }
 
+std::string EncodeQueryValue(std::string_view text) {
+  static constexpr char kHex[] = "0123456789ABCDEF";
+  std::string encoded;
+  encoded.reserve(text.size());
+  for (const char c : text) {
+    const auto byte = static_cast<unsigned char>(c);
+    if ((byte >= 'A' && byte <= 'Z') || (byte >= 'a' && byte <= 'z') ||
+        (byte >= '0' && byte <= '9') || byte == '-' || byte == '.' || byte == '_' || byte == '~') {
+      encoded += c;
+    } else {
+      encoded += '%';
+      encoded += kHex[byte >> 4];
+      encoded += kHex[byte & 15];
+    }
+  }
+  return encoded;
+}
+
 StatusOr<BakeRequest> ParseBakeRequest(std::string_view json_text) {
   const json body = json::parse(json_text, nullptr, /*allow_exceptions=*/false);
   if (body.is_discarded()) return InvalidArgument("the body is not valid JSON");
   if (!body.is_object()) return InvalidArgument("the body must be a JSON object");
   static const std::set<std::string> kKnown = {
-      "character", "motion", "levels",        "all_levels",
-      "variant",   "fps",    "locked_joints", "keep_pd_translation"};
+      "character",  "motion",  "clips", "ranking",       "levels",
+      "all_levels", "variant", "fps",   "locked_joints", "keep_pd_translation"};
   for (const auto& [key, value] : body.items()) {
     if (!kKnown.count(key)) {
       return InvalidArgument("unknown field '" + key.substr(0, 64) +
-                             "' (known: character, motion, levels, all_levels, variant, fps, "
-                             "locked_joints, keep_pd_translation)");
+                             "' (known: character, motion, clips, ranking, levels, all_levels, "
+                             "variant, fps, locked_joints, keep_pd_translation)");
     }
   }
   BakeRequest request;
@@ -64,6 +82,38 @@ StatusOr<BakeRequest> ParseBakeRequest(std::string_view json_text) {
       return InvalidArgument("'motion' must be a string (a motion id or an animation name)");
     request.motion = motion->get<std::string>();
     if (request.motion.size() > kMaxNameBytes) return InvalidArgument("'motion' is too long");
+  }
+  if (const auto clips = body.find("clips"); clips != body.end() && !clips->is_null()) {
+    if (!clips->is_array())
+      return InvalidArgument("'clips' must be an array of motion ids or animation names");
+    if (clips->size() > kMaxListEntries)
+      return InvalidArgument("'clips' has more than 1024 entries");
+    for (const json& clip : *clips) {
+      if (!clip.is_string() || clip.get<std::string>().empty() ||
+          clip.get<std::string>().size() > kMaxNameBytes) {
+        return InvalidArgument(
+            "'clips' entries must be motion ids or animation names (non-empty strings)");
+      }
+      request.clips.push_back(clip.get<std::string>());
+    }
+    if (request.clips.empty()) {
+      return InvalidArgument(
+          "'clips' is empty: name at least one clip, or leave it out to bake "
+          "every motion of the character");
+    }
+  }
+  if (!request.motion.empty() && !request.clips.empty()) {
+    return InvalidArgument("give 'motion' (one clip) or 'clips' (several), not both");
+  }
+  if (const auto ranking = body.find("ranking"); ranking != body.end() && !ranking->is_null()) {
+    if (!ranking->is_string())
+      return InvalidArgument("'ranking' must be a string: greedy or paper");
+    request.ranking = ranking->get<std::string>();
+    if (std::find(std::begin(kRankingNames), std::end(kRankingNames), request.ranking) ==
+        std::end(kRankingNames)) {
+      return InvalidArgument("'ranking' must be greedy (the default) or paper, not '" +
+                             request.ranking.substr(0, 64) + "'");
+    }
   }
   if (const auto levels = body.find("levels"); levels != body.end() && !levels->is_null()) {
     if (!levels->is_array())
@@ -155,6 +205,8 @@ void to_json(json& j, const CharacterInfo& v) {
 void to_json(json& j, const BakeRequest& v) {
   j = json{{"character", v.character},
            {"motion", OptionalText(v.motion)},
+           {"clips", v.clips.empty() ? json(nullptr) : json(v.clips)},
+           {"ranking", v.ranking},
            {"levels", v.levels},
            {"all_levels", v.all_levels},
            {"variant", v.variant},
@@ -197,11 +249,21 @@ void to_json(json& j, const LevelEntry& v) {
            {"url", "/v1/levels/" + v.hash}};
 }
 
+void to_json(json& j, const BakeClip& v) {
+  j = json{{"motion", v.motion},
+           {"animation", v.animation},
+           {"frames", v.frames},
+           {"fps", v.fps},
+           {"first_frame", v.first_frame}};
+}
+
 void to_json(json& j, const BakeInfo& v) {
   j = json{{"id", v.id},
            {"character", v.character},
            {"motion", v.motion},
            {"animation", v.animation},
+           {"clips", v.clips},
+           {"ranking", v.ranking},
            {"request", v.request},
            {"state", v.state},
            {"frames", v.frames},
@@ -217,11 +279,17 @@ void to_json(json& j, const BakeInfo& v) {
 }
 
 void to_json(json& j, const LevelChoice& v) {
-  j = json{{"bake", v.bake},           {"px", v.px},
-           {"budget_px", v.budget_px}, {"index", v.index},
-           {"joints", v.joints},       {"max_vertex_error_pct", v.max_vertex_error_pct},
-           {"error_px", v.error_px},   {"within_budget", v.within_budget},
-           {"hash", v.hash},           {"url", v.url},
+  j = json{{"bake", v.bake},
+           {"clip", OptionalText(v.clip)},
+           {"px", v.px},
+           {"budget_px", v.budget_px},
+           {"index", v.index},
+           {"joints", v.joints},
+           {"max_vertex_error_pct", v.max_vertex_error_pct},
+           {"error_px", v.error_px},
+           {"within_budget", v.within_budget},
+           {"hash", v.hash},
+           {"url", v.url},
            {"bytes", v.bytes}};
 }
 
@@ -265,6 +333,8 @@ void from_json(const json& j, CharacterInfo& v) {
 void from_json(const json& j, BakeRequest& v) {
   j.at("character").get_to(v.character);
   ReadOptional(j, "motion", v.motion);
+  ReadOptional(j, "clips", v.clips);
+  ReadOptional(j, "ranking", v.ranking);
   ReadOptional(j, "levels", v.levels);
   ReadOptional(j, "all_levels", v.all_levels);
   ReadOptional(j, "variant", v.variant);
@@ -304,11 +374,21 @@ void from_json(const json& j, LevelEntry& v) {
   ReadOptional(j, "bytes", v.bytes);
 }
 
+void from_json(const json& j, BakeClip& v) {
+  j.at("motion").get_to(v.motion);
+  j.at("animation").get_to(v.animation);
+  ReadOptional(j, "frames", v.frames);
+  ReadOptional(j, "fps", v.fps);
+  ReadOptional(j, "first_frame", v.first_frame);
+}
+
 void from_json(const json& j, BakeInfo& v) {
   j.at("id").get_to(v.id);
   j.at("character").get_to(v.character);
   ReadOptional(j, "motion", v.motion);
   ReadOptional(j, "animation", v.animation);
+  ReadOptional(j, "clips", v.clips);
+  ReadOptional(j, "ranking", v.ranking);
   ReadOptional(j, "request", v.request);
   j.at("state").get_to(v.state);
   ReadOptional(j, "frames", v.frames);
@@ -322,6 +402,7 @@ void from_json(const json& j, BakeInfo& v) {
 
 void from_json(const json& j, LevelChoice& v) {
   j.at("bake").get_to(v.bake);
+  ReadOptional(j, "clip", v.clip);
   j.at("px").get_to(v.px);
   ReadOptional(j, "budget_px", v.budget_px);
   j.at("index").get_to(v.index);

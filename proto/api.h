@@ -24,6 +24,12 @@ bool IsContentId(std::string_view text);
 
 // The solver variants a bake accepts (core::VariantName spells the same).
 inline constexpr std::string_view kVariantNames[] = {"vp", "vpno", "vp+pd", "vpno+pd"};
+// The joint rankings a bake accepts (core::RankingMethodName spells the same).
+inline constexpr std::string_view kRankingNames[] = {"greedy", "paper"};
+
+// `text` percent-encoded for a URL's query value: every byte but A-Z a-z 0-9 - . _ ~
+// as %XX (a clip's name in ?clip=).
+std::string EncodeQueryValue(std::string_view text);
 
 struct FileInfo {
   std::string name;    // plain file name as uploaded
@@ -62,9 +68,14 @@ struct CharacterInfo {
 // POST /v1/bakes. Defaults match the `motionlod bake` tool.
 struct BakeRequest {
   std::string character;  // character id
-  // A motion id (of this character), or the name of one of the character's own
-  // animations; empty: the character's first animation.
+  // One clip: a motion id (of this character), or the name of one of its animations (its
+  // own first, then those of its motion files).
   std::string motion;
+  // The clips baked together, in this order, each as `motion` names one. Neither `motion`
+  // nor `clips`: every motion of the character, in the order of its motion list. As
+  // resolved by the daemon: the motion ids, `motion` empty.
+  std::vector<std::string> clips;
+  std::string ranking = "greedy";  // the joint ranking: greedy or paper
   std::vector<int> levels;  // kept joint counts; empty: the default ladder
   bool all_levels = false;  // every count from all joints down to the locked minimum
   std::string variant = "vpno+pd";
@@ -74,9 +85,10 @@ struct BakeRequest {
 };
 
 // Strict parse of a bake request: unknown fields, wrong types, a malformed id, an unknown
-// variant, fps outside [0, 1000], level counts below 1 or above 65535, more than 1024
-// levels or locked joints, and levels together with all_levels are kInvalidArgument with
-// a message naming the field.
+// variant or ranking, fps outside [0, 1000], level counts below 1 or above 65535, more
+// than 1024 levels, clips or locked joints, an empty clip, and levels together with
+// all_levels or motion together with clips are kInvalidArgument with a message naming
+// the field.
 StatusOr<BakeRequest> ParseBakeRequest(std::string_view json_text);
 
 struct JobError {
@@ -118,16 +130,28 @@ struct LevelEntry {
   uint64_t bytes = 0;
 };
 
+// One clip of a bake: the frames [first_frame, first_frame + frames) of its level set.
+// frames, fps and first_frame are 0 until the bake succeeded.
+struct BakeClip {
+  std::string motion;     // motion id
+  std::string animation;  // the clip's name in the level set (?clip= of the level routes)
+  int frames = 0;
+  double fps = 0;
+  int first_frame = 0;
+};
+
 // GET /v1/bakes/{id}.
 struct BakeInfo {
   std::string id;
   std::string character;
-  std::string motion;  // motion id
-  std::string animation;
-  BakeRequest request;  // as resolved (motion id filled in, lists sorted)
+  std::string motion;           // the first clip's motion id
+  std::string animation;        // the first clip's animation
+  std::vector<BakeClip> clips;  // in frame order
+  std::string ranking;
+  BakeRequest request;  // as resolved (clips as motion ids, lists sorted)
   std::string state;    // the job's state
-  int frames = 0;
-  double fps = 0;
+  int frames = 0;       // every clip's
+  double fps = 0;       // the first clip's
   std::string variant;
   std::string level_set;  // sha256 of the whole level set (empty until succeeded)
   uint64_t level_set_bytes = 0;
@@ -135,9 +159,11 @@ struct BakeInfo {
   std::string created_at;
 };
 
-// GET /v1/bakes/{id}/level?px=&budget= with Accept: application/json.
+// GET /v1/bakes/{id}/level?px=&budget=&clip= with Accept: application/json. The level
+// is chosen by the figures over every clip; `clip` narrows the file to one clip.
 struct LevelChoice {
   std::string bake;
+  std::string clip;  // the clip asked for; empty: the file holds every clip
   double px = 0;
   double budget_px = 1;
   int index = 0;
@@ -146,8 +172,8 @@ struct LevelChoice {
   double error_px = 0;  // px * max_vertex_error_pct / 100: the worst deviation on screen
   bool within_budget = true;
   std::string hash;
-  std::string url;  // /v1/levels/{hash}
-  uint64_t bytes = 0;
+  std::string url;     // /v1/levels/{hash}, with ?clip= when a clip was asked for
+  uint64_t bytes = 0;  // the file of every clip
 };
 
 // RFC 9457 problem details (application/problem+json).
@@ -166,6 +192,7 @@ void to_json(nlohmann::json& j, const CharacterInfo& v);
 void to_json(nlohmann::json& j, const BakeRequest& v);
 void to_json(nlohmann::json& j, const JobStatus& v);
 void to_json(nlohmann::json& j, const LevelEntry& v);
+void to_json(nlohmann::json& j, const BakeClip& v);
 void to_json(nlohmann::json& j, const BakeInfo& v);
 void to_json(nlohmann::json& j, const LevelChoice& v);
 void to_json(nlohmann::json& j, const Problem& v);
@@ -179,6 +206,7 @@ void from_json(const nlohmann::json& j, CharacterInfo& v);
 void from_json(const nlohmann::json& j, BakeRequest& v);
 void from_json(const nlohmann::json& j, JobStatus& v);
 void from_json(const nlohmann::json& j, LevelEntry& v);
+void from_json(const nlohmann::json& j, BakeClip& v);
 void from_json(const nlohmann::json& j, BakeInfo& v);
 void from_json(const nlohmann::json& j, LevelChoice& v);
 void from_json(const nlohmann::json& j, Problem& v);

@@ -56,6 +56,8 @@ if [ ! -e "$work/seeds/.done" ]; then
     >"$work/seeds/api_fuzz/levels.json"
   printf '%s' '{"character":"'"$(printf 'b%.0s' {1..64})"'","motion":"Walk","all_levels":true,"variant":"vp","locked_joints":["Head"],"keep_pd_translation":true}' \
     >"$work/seeds/api_fuzz/all.json"
+  printf '%s' '{"character":"'"$(printf 'c%.0s' {1..64})"'","clips":["Walk","Run"],"ranking":"paper"}' \
+    >"$work/seeds/api_fuzz/clips.json"
   # The data set has no DirectX or SMD file: a small skinned-skeleton seed of each.
   mkdir -p "$work/seeds/import_x_fuzz" "$work/seeds/import_smd_fuzz"
   printf '%s\n' 'xof 0303txt 0032' 'Frame Root {' \

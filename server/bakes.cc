@@ -24,18 +24,109 @@ std::array<uint8_t, 32> HexToBytes(const std::string& hex) {
   return bytes;
 }
 
+// A motion of the character named as the API names one (a motion id, or an animation
+// name: the character's own animation first, else the only motion file's one of that name).
+// `field` names the request field in messages.
+Result<const MotionRecord*> FindMotion(Store& store, const std::vector<MotionRecord>& motions,
+                                       const std::string& name, const std::string& field) {
+  if (api::IsContentId(name)) {
+    for (const MotionRecord& m : motions) {
+      if (m.id == name) return &m;
+    }
+    auto other = store.GetMotion(name);
+    if (other.ok() && other->has_value()) {
+      return Error(ErrorKind::kUnprocessable,
+                   field + ": motion " + name + " belongs to another character");
+    }
+    return Error(ErrorKind::kNotFound, field + ": no motion " + name);
+  }
+  std::vector<const MotionRecord*> named;
+  for (const MotionRecord& m : motions) {
+    if (m.animation == name) named.push_back(&m);
+  }
+  // The character's own animation wins over a same-named one of a motion file.
+  for (const MotionRecord* m : named) {
+    if (m->source == "character") return m;
+  }
+  if (named.size() == 1) return named[0];
+  if (named.size() > 1) {
+    return Error(ErrorKind::kUnprocessable,
+                 field + ": several motions are named '" + name + "': give a motion id");
+  }
+  std::string available;
+  for (const MotionRecord& m : motions)
+    available += (available.empty() ? "'" : ", '") + m.animation + "'";
+  return Error(ErrorKind::kUnprocessable,
+               field + ": the character has no animation named '" + name + "'" +
+                   (available.empty() ? "" : "; available: " + available));
+}
+
+// The motions a request bakes, in order: `motion`, the `clips`, or every motion of the
+// character. Each once, and no two of the same animation name (the levels' clips are
+// addressed by name).
+Result<std::vector<const MotionRecord*>> ResolveClips(Store& store,
+                                                      const CharacterRecord& character,
+                                                      const std::vector<MotionRecord>& motions,
+                                                      const api::BakeRequest& request) {
+  std::vector<const MotionRecord*> clips;
+  if (!request.motion.empty()) {
+    auto motion = FindMotion(store, motions, request.motion, "'motion'");
+    if (!motion.ok()) return motion.error();
+    clips.push_back(*motion);
+  } else if (!request.clips.empty()) {
+    for (size_t c = 0; c < request.clips.size(); ++c) {
+      auto motion =
+          FindMotion(store, motions, request.clips[c], "'clips'[" + std::to_string(c) + "]");
+      if (!motion.ok()) return motion.error();
+      clips.push_back(*motion);
+    }
+  } else {
+    for (const MotionRecord& m : motions) clips.push_back(&m);
+    if (clips.empty()) {
+      return Error(ErrorKind::kUnprocessable,
+                   "the character has no motion: upload one with POST /v1/motions?character=" +
+                       character.id + " and name it in 'motion' or 'clips'");
+    }
+  }
+  for (size_t c = 0; c < clips.size(); ++c) {
+    for (size_t before = 0; before < c; ++before) {
+      if (clips[before] == clips[c]) {
+        return Error(ErrorKind::kUnprocessable, "motion " + clips[c]->id + " ('" +
+                                                    clips[c]->animation +
+                                                    "') is named twice in 'clips'");
+      }
+      if (clips[before]->animation == clips[c]->animation) {
+        return Error(ErrorKind::kUnprocessable, "two clips are named '" + clips[c]->animation +
+                                                    "' (motions " + clips[before]->id + " and " +
+                                                    clips[c]->id +
+                                                    "): a bake's clips need distinct animation "
+                                                    "names; name the clips to bake in 'clips'");
+      }
+    }
+  }
+  return clips;
+}
+
 }  // namespace
 
-BakeKey MakeBakeKey(const api::BakeRequest& resolved, const std::string& motion_source_id,
-                    const std::string& animation, uint64_t settings_hash) {
+ClipIdentity IdentityOf(const MotionRecord& motion) {
+  return {motion.source == "file" ? motion.source_id : "character", motion.animation};
+}
+
+BakeKey MakeBakeKey(const api::BakeRequest& resolved, const std::vector<ClipIdentity>& clips,
+                    uint64_t settings_hash) {
   char fps[64];
   std::snprintf(fps, sizeof fps, "%.17g", resolved.fps);
-  const std::string inputs = "motionlod-inputs/1\ncharacter " + resolved.character + "\nmotion " +
-                             motion_source_id + "\nanimation " + std::to_string(animation.size()) +
-                             ":" + animation + "\nfps " + fps + "\n";
+  std::string inputs = "motionlod-inputs/2\ncharacter " + resolved.character + "\nclips " +
+                       std::to_string(clips.size()) + "\n";
+  for (const ClipIdentity& clip : clips) {
+    inputs += "clip " + clip.source + " " + std::to_string(clip.animation.size()) + ":" +
+              clip.animation + "\n";
+  }
+  inputs += std::string("fps ") + fps + "\n";
   std::string key =
-      "motionlod-bake/1\nalgorithm " + std::to_string(core::kAlgorithmVersion) + "\n" + inputs;
-  key += "levels ";
+      "motionlod-bake/2\nalgorithm " + std::to_string(core::kAlgorithmVersion) + "\n" + inputs;
+  key += "ranking " + resolved.ranking + "\nlevels ";
   if (resolved.all_levels) {
     key += "all";
   } else if (resolved.levels.empty()) {
@@ -55,14 +146,16 @@ BakeKey MakeBakeKey(const api::BakeRequest& resolved, const std::string& motion_
 }
 
 pipeline::BakeRequest MakePipelineRequest(const api::BakeRequest& resolved,
-                                          pipeline::ClipSource clip, int bake_threads,
+                                          std::vector<pipeline::ClipSource> clips, int bake_threads,
                                           core::SimdChoice simd) {
   pipeline::BakeRequest request;
-  request.clips = {std::move(clip)};
+  request.clips = std::move(clips);
   request.fps = resolved.fps;
   request.levels = resolved.levels;
   request.all_levels = resolved.all_levels;
   request.locked_joints = resolved.locked_joints;
+  auto ranking = core::ParseRankingMethod(resolved.ranking);
+  request.ranking_method = ranking.ok() ? *ranking : core::RankingMethod::kGreedy;
   auto variant = core::ParseVariant(resolved.variant);
   request.settings.variant = variant.ok() ? *variant : core::Variant::kVPNOPD;
   request.settings.resolve_rigid_translation = !resolved.keep_pd_translation;
@@ -79,60 +172,19 @@ Result<Created<api::JobStatus>> Bakes::Submit(const api::BakeRequest& request) {
   const CharacterRecord& c = *character;
   auto motions = context_.store->ListMotions(c.id);
   if (!motions.ok()) return Internal(motions.status());
-
-  // The motion: an id of this character, an animation name, or the first embedded one.
-  const MotionRecord* motion = nullptr;
-  if (request.motion.empty()) {
-    for (const MotionRecord& m : *motions) {
-      if (m.source == "character") {
-        motion = &m;
-        break;
-      }
-    }
-    if (motion == nullptr) {
-      return Error(
-          ErrorKind::kUnprocessable,
-          "the character has no animation of its own: upload one with POST /v1/motions?character=" +
-              c.id + " and name it in 'motion'");
-    }
-  } else if (api::IsContentId(request.motion)) {
-    for (const MotionRecord& m : *motions) {
-      if (m.id == request.motion) motion = &m;
-    }
-    if (motion == nullptr) {
-      auto other = context_.store->GetMotion(request.motion);
-      if (other.ok() && other->has_value()) {
-        return Error(ErrorKind::kUnprocessable,
-                     "motion " + request.motion + " belongs to another character");
-      }
-      return Error(ErrorKind::kNotFound, "no motion " + request.motion);
-    }
-  } else {
-    std::vector<const MotionRecord*> named;
-    for (const MotionRecord& m : *motions) {
-      if (m.animation == request.motion) named.push_back(&m);
-    }
-    // The character's own animation wins over a same-named one of a motion file.
-    for (const MotionRecord* m : named) {
-      if (m->source == "character") motion = m;
-    }
-    if (motion == nullptr && named.size() == 1) motion = named[0];
-    if (motion == nullptr) {
-      std::string available;
-      for (const MotionRecord& m : *motions)
-        available += (available.empty() ? "'" : ", '") + m.animation + "'";
-      if (named.size() > 1) {
-        return Error(ErrorKind::kUnprocessable,
-                     "several motions are named '" + request.motion + "': give a motion id");
-      }
-      return Error(ErrorKind::kUnprocessable,
-                   "the character has no animation named '" + request.motion + "'" +
-                       (available.empty() ? "" : "; available: " + available));
-    }
-  }
+  auto clips = ResolveClips(*context_.store, c, *motions, request);
+  if (!clips.ok()) return clips.error();
 
   api::BakeRequest resolved = request;
-  resolved.motion = motion->id;
+  resolved.motion.clear();
+  resolved.clips.clear();
+  std::vector<ClipIdentity> identities;
+  std::vector<pipeline::ClipSource> sources;
+  for (const MotionRecord* motion : *clips) {
+    resolved.clips.push_back(motion->id);
+    identities.push_back(IdentityOf(*motion));
+    sources.push_back({nullptr, motion->animation, ""});
+  }
   std::sort(resolved.levels.begin(), resolved.levels.end(), std::greater<>());
   resolved.levels.erase(std::unique(resolved.levels.begin(), resolved.levels.end()),
                         resolved.levels.end());
@@ -152,20 +204,18 @@ Result<Created<api::JobStatus>> Bakes::Submit(const api::BakeRequest& request) {
       return Error(ErrorKind::kUnprocessable, "the character has no joint named '" + joint + "'");
     }
   }
-  const pipeline::BakeRequest pipeline_request =
-      MakePipelineRequest(resolved, {nullptr, motion->animation, ""}, context_.config.bake_threads,
-                          context_.config.simd);
+  const pipeline::BakeRequest pipeline_request = MakePipelineRequest(
+      resolved, std::move(sources), context_.config.bake_threads, context_.config.simd);
   if (Status status = pipeline_request.settings.Validate(); !status.ok()) {
     return Error(ErrorKind::kBadRequest, status.message());
   }
-  const BakeKey key =
-      MakeBakeKey(resolved, motion->source == "file" ? motion->source_id : "character",
-                  motion->animation, pipeline_request.settings.Hash());
+  const BakeKey key = MakeBakeKey(resolved, identities, pipeline_request.settings.Hash());
   const int64_t now = NowMs();
   BakeRecord bake;
   bake.id = key.id;
   bake.character_id = c.id;
-  bake.motion_id = motion->id;
+  bake.motion_id = resolved.clips.front();
+  bake.clip_motions = resolved.clips;
   bake.request_json = json(resolved).dump();
   bake.created_ms = now;
   JobRecord job;
@@ -184,7 +234,10 @@ Result<Created<api::JobStatus>> Bakes::Submit(const api::BakeRequest& request) {
     (void)context_.store->DeleteBake(job.id);
     return queued.error();
   }
-  spdlog::info("bake {} queued: character {}, animation '{}'", key.id, c.id, motion->animation);
+  std::string names;
+  for (const MotionRecord* motion : *clips)
+    names += (names.empty() ? "'" : ", '") + motion->animation + "'";
+  spdlog::info("bake {} queued: character {}, clips {}", key.id, c.id, names);
   auto status = jobs_.Get(key.id);
   if (!status.ok()) return status.error();
   return Created<api::JobStatus>{status.value(), true};
@@ -197,8 +250,15 @@ Result<api::BakeInfo> Bakes::ToBakeInfo(const BakeRecord& bake) {
   info.motion = bake.motion_id;
   auto request = api::ParseBakeRequest(bake.request_json);
   if (request.ok()) info.request = *request;
-  auto motion = context_.store->GetMotion(bake.motion_id);
-  if (motion.ok() && motion->has_value()) info.animation = (*motion)->animation;
+  for (const std::string& motion_id : bake.clip_motions) {
+    api::BakeClip clip;
+    clip.motion = motion_id;
+    auto motion = context_.store->GetMotion(motion_id);
+    if (motion.ok() && motion->has_value()) clip.animation = (*motion)->animation;
+    info.clips.push_back(std::move(clip));
+  }
+  if (!info.clips.empty()) info.animation = info.clips.front().animation;
+  info.ranking = info.request.ranking;
   info.variant = info.request.variant;
   auto job = jobs_.Get(bake.id);
   info.state = job.ok() ? job->state : "unknown";
@@ -211,6 +271,7 @@ Result<api::BakeInfo> Bakes::ToBakeInfo(const BakeRecord& bake) {
     auto table = levels_.GetTable(bake);
     if (!table.ok()) return Internal(table.status());
     info.levels = (*table)->entries;
+    info.clips = (*table)->clips;
   }
   return info;
 }

@@ -21,7 +21,7 @@ class Bakes {
   Bakes(ServiceContext& context, Jobs& jobs, Levels& levels)
       : context_(context), jobs_(jobs), levels_(levels) {}
 
-  // Resolves the request (the motion, levels and locked joints), stores the bake and queues
+  // Resolves the request (the clips, levels and locked joints), stores the bake and queues
   // its job; the same request again is the same bake (created: false).
   Result<Created<proto::api::JobStatus>> Submit(const proto::api::BakeRequest& request);
   Result<proto::api::BakeInfo> Get(const std::string& id);
@@ -39,20 +39,29 @@ class Bakes {
   Levels& levels_;
 };
 
-// The canonical text a bake id hashes, and the SHA-256 of the inputs stored in the
-// level set (LevelSetData::source_hash). Exposed for the job runner and for tests that
-// bake in-process.
+// What a bake's identity names of a clip: its source ("character" for the character's
+// own file, else the motion file's upload id) and its animation.
+struct ClipIdentity {
+  std::string source;
+  std::string animation;
+};
+ClipIdentity IdentityOf(const MotionRecord& motion);
+
+// The canonical text a bake id hashes (the clips in order, the ranking, the levels, the
+// solver settings), and the SHA-256 of the inputs stored in the level set
+// (LevelSetData::source_hash). Exposed for the job runner and for tests that bake
+// in-process.
 struct BakeKey {
   std::string id;
   std::array<uint8_t, 32> source_hash{};
 };
-BakeKey MakeBakeKey(const proto::api::BakeRequest& resolved, const std::string& motion_source_id,
-                    const std::string& animation, uint64_t settings_hash);
+BakeKey MakeBakeKey(const proto::api::BakeRequest& resolved, const std::vector<ClipIdentity>& clips,
+                    uint64_t settings_hash);
 
-// The pipeline request the daemon bakes for a resolved API request and its clip (without
+// The pipeline request the daemon bakes for a resolved API request and its clips (without
 // the character's asset).
 pipeline::BakeRequest MakePipelineRequest(const proto::api::BakeRequest& resolved,
-                                          pipeline::ClipSource clip, int bake_threads,
+                                          std::vector<pipeline::ClipSource> clips, int bake_threads,
                                           core::SimdChoice simd = core::SimdChoice::kWidest);
 
 }  // namespace motionlod::server

@@ -323,7 +323,8 @@ StatusOr<Options> ParseCommandLine(int argc, const char* const* argv, const GetE
                  "character file(s) to upload and bake at start (the main file first)")
       ->delimiter(',');
   app.add_option("--seed-animation", options.seed_animation,
-                 "animation the seed bake uses (default: the first)");
+                 "animation the seed bake uses (default: every animation of the character, "
+                 "baked together)");
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp&) {

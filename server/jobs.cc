@@ -233,30 +233,40 @@ void Jobs::Run(const std::string& id) {
   auto request = api::ParseBakeRequest((*bake)->request_json);
   if (!request.ok()) return fail("internal", "stored request: " + request.status().message());
   auto character = store.GetCharacter((*bake)->character_id);
-  auto motion = store.GetMotion((*bake)->motion_id);
-  if (!character.ok() || !motion.ok() || !character->has_value() || !motion->has_value()) {
-    return Publish(job, true);  // deleted meanwhile
+  if (!character.ok() || !character->has_value()) return Publish(job, true);  // deleted meanwhile
+  std::vector<pipeline::ClipSource> clips;
+  std::vector<ClipIdentity> identities;
+  std::map<std::string, std::shared_ptr<const io::Asset>> motion_files;  // by upload id
+  for (const std::string& motion_id : (*bake)->clip_motions) {
+    auto motion = store.GetMotion(motion_id);
+    if (!motion.ok() || !motion->has_value()) return Publish(job, true);  // deleted meanwhile
+    const MotionRecord& m = **motion;
+    pipeline::ClipSource clip{nullptr, m.animation, ""};
+    if (m.source == "file") {
+      std::shared_ptr<const io::Asset>& file = motion_files[m.source_id];
+      if (!file) {
+        auto motion_asset = context_.LoadSource(m.source_id, m.files);
+        if (!motion_asset.ok())
+          return fail(StatusCodeName(motion_asset.status().code()),
+                      motion_asset.status().message());
+        file = *motion_asset;
+      }
+      clip.motion = file;
+      clip.label = m.files.empty() ? "" : m.files[0].name;
+    }
+    clips.push_back(std::move(clip));
+    identities.push_back(IdentityOf(m));
   }
-  const MotionRecord& m = **motion;
-  pipeline::ClipSource clip{nullptr, m.animation, ""};
-  if (m.source == "file") {
-    auto motion_asset = context_.LoadSource(m.source_id, m.files);
-    if (!motion_asset.ok())
-      return fail(StatusCodeName(motion_asset.status().code()), motion_asset.status().message());
-    clip.motion = *motion_asset;
-    clip.label = m.files.empty() ? "" : m.files[0].name;
-  }
-  pipeline::BakeRequest p =
-      MakePipelineRequest(*request, std::move(clip), context_.config.bake_threads, context_.config.simd);
+  if (clips.empty()) return fail("internal", "the stored bake names no clip");
+  pipeline::BakeRequest p = MakePipelineRequest(*request, std::move(clips),
+                                                context_.config.bake_threads, context_.config.simd);
   auto character_asset = context_.LoadSource((*character)->id, (*character)->files);
   if (!character_asset.ok())
     return fail(StatusCodeName(character_asset.status().code()),
                 character_asset.status().message());
   p.character = *character_asset;
   p.character_label = (*character)->name;
-  p.source_hash = MakeBakeKey(*request, m.source == "file" ? m.source_id : "character", m.animation,
-                              p.settings.Hash())
-                      .source_hash;
+  p.source_hash = MakeBakeKey(*request, identities, p.settings.Hash()).source_hash;
   const auto start = std::chrono::steady_clock::now();
   auto last_publish = start - std::chrono::seconds(1);
   auto output = pipeline::Bake(

@@ -1,11 +1,14 @@
 #include "server/levels.h"
 
+#include <algorithm>
 #include <cmath>
 #include <vector>
 
-#include "proto/level_selection.h"
 #include "io/sha256.h"
 #include "pipeline/export.h"
+#include "proto/aligned_bytes.h"
+#include "proto/level_format.h"
+#include "proto/level_selection.h"
 
 namespace motionlod::server {
 namespace {
@@ -14,6 +17,30 @@ namespace api = proto::api;
 using nlohmann::json;
 
 constexpr size_t kLevelTableEntries = 4096;
+
+// "'a', 'b'": names for a message.
+template <typename Names, typename NameOf>
+std::string ListNames(const Names& items, NameOf name_of) {
+  std::string list;
+  for (const auto& item : items)
+    list += (list.empty() ? "'" : ", '") + std::string(name_of(item)) + "'";
+  return list;
+}
+
+std::string ClipNames(const std::vector<api::BakeClip>& clips) {
+  return ListNames(clips, [](const api::BakeClip& clip) { return clip.animation; });
+}
+
+bool HasClip(const std::vector<api::BakeClip>& clips, const std::string& name) {
+  return std::any_of(clips.begin(), clips.end(),
+                     [&](const api::BakeClip& clip) { return clip.animation == name; });
+}
+
+ServiceError NoSuchClip(const std::string& what, const std::string& clip,
+                        const std::string& names) {
+  return Error(ErrorKind::kNotFound,
+               what + " has no clip named '" + clip + "'; its clips: " + names);
+}
 
 }  // namespace
 
@@ -49,6 +76,19 @@ StatusOr<std::shared_ptr<const Levels::Table>> Levels::GetTable(const BakeRecord
     entry.bytes = static_cast<uint64_t>((*levels)[l].bytes);
     table->entries.push_back(std::move(entry));
   }
+  // The clips: the report's clip table, with the motions of the bake in the same order.
+  if (const auto clips = report.find("clips"); clips != report.end() && clips->is_array()) {
+    for (size_t c = 0; c < clips->size(); ++c) {
+      const json& clip = (*clips)[c];
+      api::BakeClip entry;
+      entry.motion = c < bake.clip_motions.size() ? bake.clip_motions[c] : std::string();
+      entry.animation = clip.value("name", "");
+      entry.frames = clip.value("frames", 0);
+      entry.fps = clip.value("fps", 0.0);
+      entry.first_frame = clip.value("first_frame", 0);
+      table->clips.push_back(std::move(entry));
+    }
+  }
   // The heights Choose picks each level for at the default budget: one definition.
   const std::vector<proto::LevelRange> ranges = proto::LevelRanges(table->max_error_fraction, 1.0);
   for (size_t l = 0; l < count; ++l) {
@@ -69,7 +109,20 @@ void Levels::ForgetTable(const std::string& bake_id) {
   tables_.erase(bake_id);
 }
 
-Result<api::LevelChoice> Levels::Choose(const std::string& bake_id, double px, double budget_px) {
+Result<std::shared_ptr<const Levels::Table>> Levels::TableOf(const std::string& bake_id) {
+  {
+    std::lock_guard lock(tables_mutex_);
+    if (auto found = tables_.find(bake_id); found != tables_.end()) return found->second;
+  }
+  auto bake = BakeWithLevels(bake_id);
+  if (!bake.ok()) return bake.error();
+  auto table = GetTable(bake.value());
+  if (!table.ok()) return Internal(table.status());
+  return *table;
+}
+
+Result<api::LevelChoice> Levels::Choose(const std::string& bake_id, double px, double budget_px,
+                                        const std::string& clip) {
   if (!api::IsContentId(bake_id)) return MalformedId("bake");
   if (!(px > 0) || !std::isfinite(px) || px > 1e6) {
     return Error(ErrorKind::kBadRequest,
@@ -79,22 +132,16 @@ Result<api::LevelChoice> Levels::Choose(const std::string& bake_id, double px, d
     return Error(ErrorKind::kBadRequest,
                  "budget (the tolerated error in pixels) must be in (0, 1e4]");
   }
-  std::shared_ptr<const Table> table;
-  {
-    std::lock_guard lock(tables_mutex_);
-    if (auto found = tables_.find(bake_id); found != tables_.end()) table = found->second;
-  }
-  if (!table) {
-    auto bake = BakeWithLevels(bake_id);
-    if (!bake.ok()) return bake.error();
-    auto loaded = GetTable(bake.value());
-    if (!loaded.ok()) return Internal(loaded.status());
-    table = *loaded;
-  }
-  const int l = proto::SelectLevel(table->max_error_fraction, px, budget_px);
-  const api::LevelEntry& entry = table->entries[static_cast<size_t>(l)];
+  auto found = TableOf(bake_id);
+  if (!found.ok()) return found.error();
+  const Table& table = **found;
+  if (!clip.empty() && !HasClip(table.clips, clip))
+    return NoSuchClip("bake " + bake_id, clip, ClipNames(table.clips));
+  const int l = proto::SelectLevel(table.max_error_fraction, px, budget_px);
+  const api::LevelEntry& entry = table.entries[static_cast<size_t>(l)];
   api::LevelChoice choice;
   choice.bake = bake_id;
+  choice.clip = clip;
   choice.px = px;
   choice.budget_px = budget_px;
   choice.index = l;
@@ -103,27 +150,59 @@ Result<api::LevelChoice> Levels::Choose(const std::string& bake_id, double px, d
   choice.error_px = px * entry.max_vertex_error_pct / 100.0;
   choice.within_budget = choice.error_px <= budget_px;
   choice.hash = entry.hash;
-  choice.url = "/v1/levels/" + entry.hash;
+  choice.url =
+      "/v1/levels/" + entry.hash + (clip.empty() ? "" : "?clip=" + api::EncodeQueryValue(clip));
   choice.bytes = entry.bytes;
   return choice;
 }
 
-Result<LevelCache::Bytes> Levels::Get(const std::string& hash) {
+Result<Levels::LevelFile> Levels::Get(const std::string& hash, const std::string& clip) {
   if (!api::IsContentId(hash))
     return Error(ErrorKind::kNotFound, "no level with that hash (hashes are 64 hex digits)");
-  if (LevelCache::Bytes bytes = context_.cache.Get(hash)) return bytes;
-  auto size = context_.store->LevelBytes(hash);
-  if (!size.ok()) return Internal(size.status());
-  if (!size->has_value()) return Error(ErrorKind::kNotFound, "no level " + hash);
-  auto bytes = context_.blobs->Get(hash);
-  if (!bytes.ok()) {
-    if (bytes.status().code() == StatusCode::kNotFound)
-      return Error(ErrorKind::kNotFound, "no level " + hash);
-    return Internal(bytes.status());
+  LevelFile file{nullptr, hash};
+  if (!clip.empty()) {
+    // The version after "motionlod-level-clip/" changes whenever the extraction writes
+    // other bytes.
+    file.key = io::Sha256Hex("motionlod-level-clip/1\nlevel " + hash + "\nclip " +
+                             std::to_string(clip.size()) + ":" + clip + "\n");
   }
-  auto shared = std::make_shared<const std::string>(std::move(*bytes));
-  context_.cache.Put(hash, shared);
-  return LevelCache::Bytes(shared);
+  LevelCache::Bytes whole = context_.cache.Get(hash);
+  if (!whole) {
+    auto size = context_.store->LevelBytes(hash);
+    if (!size.ok()) return Internal(size.status());
+    if (!size->has_value()) return Error(ErrorKind::kNotFound, "no level " + hash);
+  }
+  // A clip's file is served only while its level is (a deleted bake's levels leave the
+  // cache and the store; the clips' files made from them cannot be listed to follow).
+  if (!clip.empty() && (file.bytes = context_.cache.Get(file.key))) return file;
+  if (!whole) {
+    auto bytes = context_.blobs->Get(hash);
+    if (!bytes.ok()) {
+      if (bytes.status().code() == StatusCode::kNotFound)
+        return Error(ErrorKind::kNotFound, "no level " + hash);
+      return Internal(bytes.status());
+    }
+    whole = std::make_shared<const std::string>(std::move(*bytes));
+    context_.cache.Put(hash, whole);
+  }
+  if (clip.empty()) {
+    file.bytes = std::move(whole);
+    return file;
+  }
+  const proto::AlignedBytes aligned = proto::AlignedBytes::CopyOf(*whole);
+  auto view = proto::DecodeLevelSet(aligned.bytes());
+  if (!view.ok()) return Internal(view.status());
+  const int c = view->FindClip(clip);
+  if (c < 0) {
+    return NoSuchClip(
+        "level " + hash, clip,
+        ListNames(view->clips(), [](const proto::ClipView& one) { return one.name; }));
+  }
+  auto one_clip = proto::ExtractLevelClip(*view, 0, static_cast<uint32_t>(c));
+  if (!one_clip.ok()) return Internal(one_clip.status());
+  file.bytes = std::make_shared<const std::string>(std::move(*one_clip));
+  context_.cache.Put(file.key, file.bytes);
+  return file;
 }
 
 Result<BakeRecord> Levels::BakeWithLevels(const std::string& bake_id) {
@@ -138,7 +217,8 @@ Result<BakeRecord> Levels::BakeWithLevels(const std::string& bake_id) {
   return bake;
 }
 
-Result<Levels::GltfFile> Levels::GetGltf(const std::string& bake_id, int joints) {
+Result<Levels::GltfFile> Levels::GetGltf(const std::string& bake_id, int joints,
+                                         const std::string& clip) {
   auto bake = BakeWithLevels(bake_id);
   if (!bake.ok()) return bake.error();
   auto levels = context_.store->GetLevels(bake_id);
@@ -154,23 +234,28 @@ Result<Levels::GltfFile> Levels::GetGltf(const std::string& bake_id, int joints)
                                            std::to_string(joints) + " joints; its levels keep " +
                                            available);
   }
-  auto motion = context_.store->GetMotion(bake->motion_id);
-  if (!motion.ok()) return Internal(motion.status());
-  const std::string animation = motion->has_value() ? (*motion)->animation : std::string();
+  auto table = GetTable(bake.value());
+  if (!table.ok()) return Internal(table.status());
+  const std::vector<api::BakeClip>& clips = (*table)->clips;
+  if (!clip.empty() && !HasClip(clips, clip))
+    return NoSuchClip("bake " + bake_id, clip, ClipNames(clips));
+  const std::string animation = !clip.empty()   ? clip
+                                : clips.empty() ? std::string()
+                                                : clips.front().animation;
   GltfFile file;
   // The version after "motionlod-gltf/" changes whenever the exporter writes other bytes.
   file.key =
       io::Sha256Hex("motionlod-gltf/1\nlevel " + level->hash + "\ncharacter " + bake->character_id +
                     "\nanimation " + std::to_string(animation.size()) + ":" + animation + "\n");
   if ((file.glb = context_.cache.Get(file.key))) return file;
-  auto one_level = Get(level->hash);
+  auto one_level = Get(level->hash, "");
   if (!one_level.ok()) return one_level.error();
   auto character =
       FindRecord(*context_.store, &Store::GetCharacter, "character", bake->character_id);
   if (!character.ok()) return character.error();
   auto asset = context_.LoadSource(character->id, character->files);
   if (!asset.ok()) return Internal(asset.status());
-  auto exported = pipeline::ExportLevelGltf(**asset, *one_level.value(), joints, animation);
+  auto exported = pipeline::ExportLevelGltf(**asset, *one_level->bytes, joints, animation);
   if (!exported.ok()) return Internal(exported.status());
   file.glb = std::make_shared<const std::string>(std::move(exported->glb));
   context_.cache.Put(file.key, file.glb);

@@ -253,11 +253,27 @@ RangeAnswer ResolveRange(std::string_view header, uint64_t size, ByteRange& out)
   return RangeAnswer::kPartial;
 }
 
+// ?clip=NAME of the level routes: "" when absent; false (the problem set) when empty.
+bool ReadClip(const Request& request, Response& response, std::string& clip) {
+  const auto text = request.Query("clip");
+  if (!text) return true;
+  if (text->empty()) {
+    http::SetProblem(request, response, 400,
+                     "clip must name one of the bake's clips (an animation name); leave it out "
+                     "for every clip");
+    return false;
+  }
+  clip = std::string(*text);
+  return true;
+}
+
 void ServeLevel(Levels& levels, Request& request, Response& response) {
   const std::string& hash = request.path_params[0];
-  auto bytes = levels.Get(hash);
-  if (!bytes.ok()) return Fail(request, response, bytes.error());
-  const std::string etag = "\"" + hash + "\"";
+  std::string clip;
+  if (!ReadClip(request, response, clip)) return;
+  auto file = levels.Get(hash, clip);
+  if (!file.ok()) return Fail(request, response, file.error());
+  const std::string etag = "\"" + file->key + "\"";
   response.SetHeader("ETag", etag);
   response.SetHeader("Cache-Control", kImmutable);
   response.SetHeader("Accept-Ranges", "bytes");
@@ -265,7 +281,7 @@ void ServeLevel(Levels& levels, Request& request, Response& response) {
     response.status = 304;
     return;
   }
-  const LevelCache::Bytes& shared = bytes.value();
+  const LevelCache::Bytes& shared = file->bytes;
   const uint64_t size = shared->size();
   response.content_type = kLevelContentType;
   response.shared = shared;
@@ -573,10 +589,13 @@ http::Router MakeRouter(const RouteContext& context) {
                                            "budget must be a number (pixels)");
                  budget = *parsed;
                }
-               auto choice = levels.Choose(request.path_params[0], *px, budget);
+               std::string clip;
+               if (!ReadClip(request, response, clip)) return;
+               auto choice = levels.Choose(request.path_params[0], *px, budget, clip);
                if (!choice.ok()) return Fail(request, response, choice.error());
                response.SetHeader("Vary", "Accept");
-               // A bake id names its content, so the choice for (bake, px, budget) never changes.
+               // A bake id names its content, so the choice for (bake, px, budget, clip) never
+               // changes.
                response.SetHeader("Cache-Control", "public, max-age=86400");
                const std::string accept = Lower(request.Header("accept").value_or(""));
                if (accept.find("application/json") != std::string::npos) {
@@ -600,7 +619,9 @@ http::Router MakeRouter(const RouteContext& context) {
               request, response, 404,
               "a level is exported as /v1/bakes/{id}/levels/{joints}.glb, joints its kept count");
         }
-        auto gltf = levels.GetGltf(request.path_params[0], static_cast<int>(*joints));
+        std::string clip;
+        if (!ReadClip(request, response, clip)) return;
+        auto gltf = levels.GetGltf(request.path_params[0], static_cast<int>(*joints), clip);
         if (!gltf.ok()) return Fail(request, response, gltf.error());
         const std::string etag = "\"" + gltf->key + "\"";
         response.SetHeader("ETag", etag);

@@ -11,7 +11,17 @@ namespace {
 
 using nlohmann::json;
 
-constexpr int kSchemaVersion = 1;
+// 1: the first schema. 2: bake_clips, the motions a bake bakes together (a version 1
+// database gains it, each bake's one motion as its clip).
+constexpr int kSchemaVersion = 2;
+
+constexpr const char* kBakeClipsTable = R"sql(
+CREATE TABLE bake_clips (
+  bake_id TEXT NOT NULL REFERENCES bakes(id) ON DELETE CASCADE, idx INTEGER NOT NULL,
+  motion_id TEXT NOT NULL REFERENCES motions(id) ON DELETE CASCADE,
+  PRIMARY KEY (bake_id, idx));
+CREATE INDEX bake_clips_motion ON bake_clips(motion_id);
+)sql";
 
 Status SqlError(sqlite3* db, const std::string& what) {
   return Status(StatusCode::kInternal, "database: " + what + ": " + sqlite3_errmsg(db));
@@ -277,12 +287,24 @@ Status Store::Migrate() {
   Statement version(db_, "SELECT value FROM meta WHERE key = 'schema_version'");
   const int rc = version.Step();
   if (rc == SQLITE_ROW) {
-    if (version.Text(0) != std::to_string(kSchemaVersion)) {
-      return Status(StatusCode::kUnsupported, "the database has schema version " + version.Text(0) +
-                                                  "; this build reads version " +
+    const std::string found = version.Text(0);
+    if (found == std::to_string(kSchemaVersion)) return Status::Ok();
+    if (found != "1") {
+      return Status(StatusCode::kUnsupported, "the database has schema version " + found +
+                                                  "; this build reads versions 1 and " +
                                                   std::to_string(kSchemaVersion));
     }
-    return Status::Ok();
+    Transaction transaction(db_);
+    if (!transaction.status().ok()) return transaction.status();
+    if (Status status = Exec(db_, kBakeClipsTable); !status.ok()) return status;
+    if (Status status = Exec(db_,
+                             "INSERT INTO bake_clips (bake_id, idx, motion_id) "
+                             "SELECT id, 0, motion_id FROM bakes;"
+                             "UPDATE meta SET value = '2' WHERE key = 'schema_version'");
+        !status.ok()) {
+      return status;
+    }
+    return transaction.Commit();
   }
   if (rc != SQLITE_DONE) return SqlError(db_, "read schema version");
   Transaction transaction(db_);
@@ -325,6 +347,7 @@ CREATE INDEX jobs_bake ON jobs(bake_id);
 CREATE INDEX jobs_state ON jobs(state);
 )sql";
   if (Status status = Exec(db_, kSchema); !status.ok()) return status;
+  if (Status status = Exec(db_, kBakeClipsTable); !status.ok()) return status;
   Statement set(db_, "INSERT INTO meta (key, value) VALUES ('schema_version', ?)");
   set.Bind(1, std::to_string(kSchemaVersion));
   if (Status status = set.Run("write schema version"); !status.ok()) return status;
@@ -478,6 +501,11 @@ StatusOr<bool> Store::InsertBakeAndJob(const BakeRecord& bake, const JobRecord& 
       .Bind(5, bake.created_ms);
   if (Status status = insert.Run("insert bake"); !status.ok()) return status;
   if (sqlite3_changes(db_) == 0) return false;
+  for (size_t c = 0; c < bake.clip_motions.size(); ++c) {
+    Statement clip(db_, "INSERT INTO bake_clips (bake_id, idx, motion_id) VALUES (?, ?, ?)");
+    clip.Bind(1, bake.id).Bind(2, static_cast<int64_t>(c)).Bind(3, bake.clip_motions[c]);
+    if (Status status = clip.Run("insert bake clip"); !status.ok()) return status;
+  }
   Statement insert_job(db_,
                        "INSERT INTO jobs (id, bake_id, state, created_ms) VALUES (?, ?, ?, ?)");
   insert_job.Bind(1, job.id).Bind(2, job.bake_id).Bind(3, job.state).Bind(4, job.created_ms);
@@ -486,11 +514,24 @@ StatusOr<bool> Store::InsertBakeAndJob(const BakeRecord& bake, const JobRecord& 
   return true;
 }
 
+Status Store::ReadClipMotions(BakeRecord& bake) {
+  Statement select(db_, "SELECT motion_id FROM bake_clips WHERE bake_id = ? ORDER BY idx");
+  select.Bind(1, bake.id);
+  auto motions =
+      select.ReadAll("read bake clips", [](const Statement& row) { return row.Text(0); });
+  if (!motions.ok()) return motions.status();
+  bake.clip_motions = std::move(*motions);
+  return Status::Ok();
+}
+
 StatusOr<std::optional<BakeRecord>> Store::GetBake(const std::string& id) {
   std::lock_guard lock(mutex_);
   Statement select(db_, Sql("SELECT ", kBakeColumns, " FROM bakes WHERE id = ?").c_str());
   select.Bind(1, id);
-  return select.ReadOne("read bake", ReadBake);
+  auto bake = select.ReadOne("read bake", ReadBake);
+  if (!bake.ok() || !bake->has_value()) return bake;
+  if (Status status = ReadClipMotions(**bake); !status.ok()) return status;
+  return bake;
 }
 
 StatusOr<std::vector<BakeRecord>> Store::ListBakes(const std::string& character_id) {
@@ -500,11 +541,16 @@ StatusOr<std::vector<BakeRecord>> Store::ListBakes(const std::string& character_
                        " FROM bakes WHERE ?1 = '' OR character_id = ?1 ORDER BY created_ms, id")
                        .c_str());
   select.Bind(1, character_id);
-  return select.ReadAll("list bakes", [](const Statement& row) {
+  auto bakes = select.ReadAll("list bakes", [](const Statement& row) {
     BakeRecord record = ReadBake(row);
     record.report_json.clear();  // lists stay small
     return record;
   });
+  if (!bakes.ok()) return bakes;
+  for (BakeRecord& bake : *bakes) {
+    if (Status status = ReadClipMotions(bake); !status.ok()) return status;
+  }
+  return bakes;
 }
 
 StatusOr<std::vector<LevelRecord>> Store::GetLevels(const std::string& bake_id) {

@@ -53,7 +53,8 @@ struct MotionRecord {
 struct BakeRecord {
   std::string id;
   std::string character_id;
-  std::string motion_id;
+  std::string motion_id;                  // the first clip's
+  std::vector<std::string> clip_motions;  // every clip's motion id, in the bake's order
   std::string request_json;  // the resolved api::BakeRequest
   int64_t created_ms = 0;
   // Filled when the bake succeeds.
@@ -104,7 +105,8 @@ class Store {
   StatusOr<std::optional<MotionRecord>> GetMotion(const std::string& id);
   StatusOr<std::vector<MotionRecord>> ListMotions(const std::string& character_id);
 
-  // The bake and its job in one transaction; false when the bake already existed.
+  // The bake (with its clips) and its job in one transaction; false when the bake
+  // already existed.
   StatusOr<bool> InsertBakeAndJob(const BakeRecord& bake, const JobRecord& job);
   StatusOr<std::optional<BakeRecord>> GetBake(const std::string& id);
   StatusOr<std::vector<BakeRecord>> ListBakes(const std::string& character_id);  // "" = all
@@ -137,6 +139,8 @@ class Store {
  private:
   explicit Store(sqlite3* db) : db_(db) {}
   Status Migrate();
+  // Reads the clips of a bake read without them.
+  Status ReadClipMotions(BakeRecord& bake);
 
   std::mutex mutex_;
   sqlite3* db_ = nullptr;

@@ -102,6 +102,64 @@ TEST_F(ClientCli, UploadBakeStatusLevelsAndFetchWithJson) {
       << "the cached level is revalidated, not downloaded again";
 }
 
+TEST_F(ClientCli, BakesSeveralClipsAndFetchesOneClipsLevel) {
+  StartDaemon();
+  const CliRun upload = Cli(Server() + "--json upload " + SamplePath());
+  ASSERT_EQ(upload.exit_code, 0) << upload.err;
+  const std::string id = json::parse(upload.out, nullptr, false).value("id", "");
+
+  const CliRun bake = Cli(Server() + "--json bake " + id +
+                          " --clip Walking_A --clip Running_A --ranking paper --levels 12,6");
+  ASSERT_EQ(bake.exit_code, 0) << bake.err;
+  const json info = json::parse(bake.out, nullptr, false);
+  ASSERT_TRUE(info.is_object()) << bake.out;
+  EXPECT_EQ(info.value("ranking", ""), "paper");
+  ASSERT_EQ(info["clips"].size(), 2u);
+  EXPECT_EQ(info["clips"][1]["animation"], "Running_A");
+  const std::string bake_id = info.value("id", "");
+
+  // --clips a,b names the same clips: the same request, but for the ranking.
+  const CliRun greedy =
+      Cli(Server() + "--json bake " + id + " --clips Walking_A,Running_A --levels 12,6 --no-wait");
+  ASSERT_EQ(greedy.exit_code, 0) << greedy.err;
+  EXPECT_NE(json::parse(greedy.out, nullptr, false).value("id", ""), bake_id);
+
+  const CliRun levels = Cli(Server() + "levels " + bake_id);
+  ASSERT_EQ(levels.exit_code, 0) << levels.err;
+  EXPECT_NE(levels.out.find("ranking paper"), std::string::npos) << levels.out;
+  EXPECT_NE(levels.out.find("clip 'Walking_A'"), std::string::npos) << levels.out;
+  EXPECT_NE(levels.out.find("clip 'Running_A'"), std::string::npos) << levels.out;
+
+  const fs::path cache = daemon_->dir() / "cache";
+  const fs::path out = daemon_->dir() / "running.mlod";
+  const std::string fetch = Server() + "--json --cache-dir " + cache.string() + " fetch " +
+                            bake_id + " --px 120 --clip Running_A -o " + out.string();
+  const CliRun first = Cli(fetch);
+  ASSERT_EQ(first.exit_code, 0) << first.err;
+  EXPECT_EQ(json::parse(first.out, nullptr, false).value("clip", ""), "Running_A");
+  EXPECT_TRUE(json::parse(first.out, nullptr, false).value("downloaded", false));
+  std::ifstream file(out, std::ios::binary);
+  std::string bytes((std::istreambuf_iterator<char>(file)), std::istreambuf_iterator<char>());
+  auto level = Level::Decode(bytes);
+  ASSERT_TRUE(level.ok()) << level.error().ToString();
+  ASSERT_EQ(level->level_set().clip_count(), 1u);
+  EXPECT_EQ(level->level_set().clip(0).name, "Running_A");
+  EXPECT_EQ(level->level().frame_count(), info["clips"][1]["frames"].get<uint32_t>());
+  const CliRun second = Cli(fetch);
+  ASSERT_EQ(second.exit_code, 0) << second.err;
+  EXPECT_FALSE(json::parse(second.out, nullptr, false).value("downloaded", true))
+      << "from the cache";
+
+  const CliRun unknown =
+      Cli(Server() + "fetch " + bake_id + " --px 120 --clip Moonwalk -o " + out.string());
+  EXPECT_EQ(unknown.exit_code, 2);
+  EXPECT_NE(unknown.err.find("'Walking_A', 'Running_A'"), std::string::npos) << unknown.err;
+  const CliRun both = Cli(Server() + "bake " + id + " --motion Walking_A --clip Running_A");
+  EXPECT_EQ(both.exit_code, 2);
+  const CliRun bad_ranking = Cli(Server() + "bake " + id + " --ranking best");
+  EXPECT_EQ(bad_ranking.exit_code, 2);
+}
+
 TEST_F(ClientCli, BadInputExitsTwoAndFailuresExitOne) {
   StartDaemon();
   const CliRun malformed = Cli(Server() + "bake not-an-id");

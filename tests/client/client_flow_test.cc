@@ -2,13 +2,14 @@
 // progress, level table, levels fetched through the disk cache (304 on a hit), the
 // problem+json detail of refused requests, and the client-side level choice with
 // hysteresis on a camera sweep.
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <numbers>
 
-#include "proto/level_selection.h"
 #include "client/level_selector.h"
+#include "proto/level_selection.h"
 #include "tests/client/fixture.h"
 
 namespace motionlod::client::testing {
@@ -204,6 +205,53 @@ TEST_F(ClientFlow, HysteresisStopsFlickerOnACameraSweepWithinTheBudget) {
   EXPECT_LE(steady_switches, 4);
   EXPECT_GE(steady_switches, 2);
   EXPECT_GT(plain_switches, 4 * steady_switches) << "the jitter straddles the thresholds";
+}
+
+TEST_F(ClientFlow, BakesClipsTogetherAndFetchesOneClipsFrames) {
+  StartDaemon();
+  ClientOptions options = Options();
+  options.cache_dir = daemon_->dir() / "cache";
+  Client client = MakeClient(options);
+  auto file = ReadUploadFile(SamplePath());
+  ASSERT_TRUE(file.ok());
+  auto character = client.UploadCharacter({*file});
+  ASSERT_TRUE(character.ok()) << character.error().ToString();
+  api::BakeRequest request;
+  request.character = character->value.id;
+  request.clips = {"Walking_A", "Running_A"};
+  request.levels = {12, 6};
+  auto job = client.SubmitBake(request);
+  ASSERT_TRUE(job.ok()) << job.error().ToString();
+  auto bake = client.WaitForBake(job->id, {}, 300);
+  ASSERT_TRUE(bake.ok()) << bake.error().ToString();
+  ASSERT_EQ(bake->clips.size(), 2u);
+  EXPECT_EQ(bake->ranking, "greedy");
+
+  auto choice = client.ChooseLevel(bake->id, 100, 1.0, "Running_A");
+  ASSERT_TRUE(choice.ok()) << choice.error().ToString();
+  EXPECT_EQ(choice->clip, "Running_A");
+  EXPECT_EQ(choice->url, "/v1/levels/" + choice->hash + "?clip=Running_A");
+  auto whole = client.FetchLevel(choice->hash);
+  ASSERT_TRUE(whole.ok()) << whole.error().ToString();
+  EXPECT_EQ(whole->level_set().clip_count(), 2u);
+  for (const api::BakeClip& clip : bake->clips) {
+    auto level = client.FetchLevel(choice->hash, clip.animation);
+    ASSERT_TRUE(level.ok()) << level.error().ToString();
+    EXPECT_EQ(level->level().frame_count(), static_cast<uint32_t>(clip.frames));
+    EXPECT_EQ(level->level_set().clip(0).name, clip.animation);
+    EXPECT_TRUE(std::ranges::equal(level->level().kept_joints(), whole->level().kept_joints()));
+  }
+  const int downloads = client.fetch_stats().downloads;
+  auto cached = client.FetchLevel(choice->hash, "Running_A");
+  ASSERT_TRUE(cached.ok());
+  EXPECT_EQ(client.fetch_stats().downloads, downloads);
+  EXPECT_EQ(client.fetch_stats().cache_hits, 1);
+
+  auto unknown = client.FetchLevel(choice->hash, "Moonwalk");
+  ASSERT_FALSE(unknown.ok());
+  EXPECT_EQ(unknown.error().http_status, 404);
+  EXPECT_NE(unknown.error().message.find("'Walking_A', 'Running_A'"), std::string::npos)
+      << unknown.error().message;
 }
 
 }  // namespace

@@ -1,6 +1,7 @@
 // The daemon's parts on their own: level cache, job queue, store, blob store, router,
 // framing guards, metrics, the HTTP server's stop, and the one-file rule for httplib.h.
 #include <gtest/gtest.h>
+#include <sqlite3.h>
 
 #include <atomic>
 #include <chrono>
@@ -113,6 +114,90 @@ TEST(BlobStore, WritesAtomicallyUnderTheHashAndDetectsCorruption) {
   fs::remove_all(dir);
 }
 
+// A database of schema version 1 (before bakes had several clips), as that version wrote
+// it: the migration gives each bake its one motion as its clip.
+TEST(Store, MigratesAVersion1DatabaseGivingEachBakeItsMotionAsItsClip) {
+  const fs::path dir = testing::TestDirectory();
+  {
+    sqlite3* db = nullptr;
+    ASSERT_EQ(sqlite3_open((dir / "db").c_str(), &db), SQLITE_OK);
+    const std::string version1 = R"sql(
+CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE characters (
+  id TEXT PRIMARY KEY, name TEXT NOT NULL, files TEXT NOT NULL, joints INTEGER NOT NULL,
+  vertices INTEGER NOT NULL, triangles INTEGER NOT NULL, proxy_skin INTEGER NOT NULL,
+  warnings TEXT NOT NULL, created_ms INTEGER NOT NULL, joint_names TEXT NOT NULL);
+CREATE TABLE motions (
+  id TEXT PRIMARY KEY,
+  character_id TEXT NOT NULL REFERENCES characters(id) ON DELETE CASCADE,
+  animation TEXT NOT NULL, source TEXT NOT NULL, source_id TEXT NOT NULL, files TEXT NOT NULL,
+  duration_seconds REAL NOT NULL, source_fps REAL NOT NULL, frames INTEGER NOT NULL,
+  warnings TEXT NOT NULL, created_ms INTEGER NOT NULL);
+CREATE INDEX motions_character ON motions(character_id);
+CREATE TABLE bakes (
+  id TEXT PRIMARY KEY,
+  character_id TEXT NOT NULL REFERENCES characters(id) ON DELETE CASCADE,
+  motion_id TEXT NOT NULL REFERENCES motions(id) ON DELETE CASCADE,
+  request TEXT NOT NULL, created_ms INTEGER NOT NULL, level_set TEXT NOT NULL DEFAULT '',
+  level_set_bytes INTEGER NOT NULL DEFAULT 0, report TEXT NOT NULL DEFAULT '',
+  frames INTEGER NOT NULL DEFAULT 0, fps REAL NOT NULL DEFAULT 0);
+CREATE INDEX bakes_character ON bakes(character_id);
+CREATE INDEX bakes_motion ON bakes(motion_id);
+CREATE TABLE levels (
+  bake_id TEXT NOT NULL REFERENCES bakes(id) ON DELETE CASCADE, idx INTEGER NOT NULL,
+  joints INTEGER NOT NULL, hash TEXT NOT NULL, bytes INTEGER NOT NULL,
+  PRIMARY KEY (bake_id, idx));
+CREATE INDEX levels_hash ON levels(hash);
+CREATE TABLE jobs (
+  seq INTEGER PRIMARY KEY AUTOINCREMENT, id TEXT NOT NULL UNIQUE,
+  bake_id TEXT NOT NULL REFERENCES bakes(id) ON DELETE CASCADE,
+  state TEXT NOT NULL CHECK (state IN ('queued', 'running', 'succeeded', 'failed')),
+  progress REAL NOT NULL DEFAULT 0, stage TEXT NOT NULL DEFAULT '',
+  error_code TEXT NOT NULL DEFAULT '', error_detail TEXT NOT NULL DEFAULT '',
+  attempts INTEGER NOT NULL DEFAULT 0, created_ms INTEGER NOT NULL,
+  started_ms INTEGER NOT NULL DEFAULT 0, finished_ms INTEGER NOT NULL DEFAULT 0);
+CREATE INDEX jobs_bake ON jobs(bake_id);
+CREATE INDEX jobs_state ON jobs(state);
+INSERT INTO meta VALUES ('schema_version', '1');
+INSERT INTO characters VALUES ('c', 'c.glb', '[]', 2, 0, 0, 0, '[]', 1, '["root","hip"]');
+INSERT INTO motions VALUES ('walk', 'c', 'walk', 'character', 'c', '[]', 1, 30, 31, '[]', 1);
+INSERT INTO motions VALUES ('run', 'c', 'run', 'character', 'c', '[]', 1, 30, 31, '[]', 2);
+INSERT INTO bakes (id, character_id, motion_id, request, created_ms) VALUES ('b1', 'c', 'walk', '{}', 1);
+INSERT INTO bakes (id, character_id, motion_id, request, created_ms) VALUES ('b2', 'c', 'run', '{}', 2);
+INSERT INTO jobs (id, bake_id, state, created_ms) VALUES ('b1', 'b1', 'succeeded', 1);
+)sql";
+    char* error = nullptr;
+    EXPECT_EQ(sqlite3_exec(db, version1.c_str(), nullptr, nullptr, &error), SQLITE_OK) << error;
+    sqlite3_free(error);
+    sqlite3_close(db);
+  }
+  for (int open = 0; open < 2; ++open) {  // migrated, then read as it is
+    auto store = Store::Open(dir / "db");
+    ASSERT_TRUE(store.ok()) << store.status().message();
+    auto b1 = (*store)->GetBake("b1");
+    ASSERT_TRUE(b1.ok() && b1->has_value());
+    EXPECT_EQ((*b1)->clip_motions, std::vector<std::string>{"walk"});
+    auto listed = (*store)->ListBakes("c");
+    ASSERT_TRUE(listed.ok());
+    ASSERT_EQ(listed->size(), 2u);
+    EXPECT_EQ((*listed)[1].clip_motions, std::vector<std::string>{"run"});
+    EXPECT_EQ((**(*store)->GetJob("b1")).state, "succeeded");
+  }
+  // A later version than this build knows is refused, not misread.
+  {
+    sqlite3* db = nullptr;
+    ASSERT_EQ(sqlite3_open((dir / "db").c_str(), &db), SQLITE_OK);
+    EXPECT_EQ(sqlite3_exec(db, "UPDATE meta SET value = '3' WHERE key = 'schema_version'", nullptr,
+                           nullptr, nullptr),
+              SQLITE_OK);
+    sqlite3_close(db);
+  }
+  auto refused = Store::Open(dir / "db");
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.status().code(), StatusCode::kUnsupported);
+  EXPECT_NE(refused.status().message().find("schema version 3"), std::string::npos);
+}
+
 TEST(Store, KeepsJobsAcrossReopensAndRequeuesTheUnfinished) {
   const fs::path dir = testing::TestDirectory();
   {
@@ -138,6 +223,7 @@ TEST(Store, KeepsJobsAcrossReopensAndRequeuesTheUnfinished) {
       b.id = std::string(64, id[0]);
       b.character_id = c.id;
       b.motion_id = m.id;
+      b.clip_motions = {m.id};
       b.request_json = "{}";
       b.created_ms = 1;
       JobRecord j;

@@ -39,11 +39,11 @@ pipeline::BakeOutput BakeLikeTheDaemon(const json& bake, const std::string& char
     EXPECT_TRUE(motion.ok());
     clip = {*motion, animation, std::filesystem::path(motion_path).filename().string()};
   }
-  pipeline::BakeRequest p = MakePipelineRequest(*request, std::move(clip), threads);
+  pipeline::BakeRequest p = MakePipelineRequest(*request, {std::move(clip)}, threads);
   auto character = io::LoadAssetFile(character_path);
   EXPECT_TRUE(character.ok());
   p.character = *character;
-  const BakeKey key = MakeBakeKey(*request, motion_source_id, animation, p.settings.Hash());
+  const BakeKey key = MakeBakeKey(*request, {{motion_source_id, animation}}, p.settings.Hash());
   EXPECT_EQ(key.id, bake["id"].get<std::string>())
       << "the bake id is the hash of the resolved request";
   p.source_hash = key.source_hash;

@@ -58,10 +58,10 @@ TEST(DaemonRestart, JobsQueuedOrRunningAtASigkillCompleteAfterARestartWithIdenti
     // The uninterrupted run.
     auto request = proto::api::ParseBakeRequest(bake["request"].dump());
     ASSERT_TRUE(request.ok());
-    pipeline::BakeRequest p = MakePipelineRequest(*request, {nullptr, bake["animation"], ""}, 1);
+    pipeline::BakeRequest p = MakePipelineRequest(*request, {{nullptr, bake["animation"], ""}}, 1);
     p.character = *character;
     p.source_hash =
-        MakeBakeKey(*request, "character", bake["animation"], p.settings.Hash()).source_hash;
+        MakeBakeKey(*request, {{"character", bake["animation"]}}, p.settings.Hash()).source_hash;
     auto expected = pipeline::Bake(p);
     ASSERT_TRUE(expected.ok()) << expected.status().message();
     const proto::AlignedBytes aligned = proto::AlignedBytes::CopyOf(expected->level_set);

@@ -6,7 +6,8 @@
 // it, moves the level slider and checks every figure the page shows against
 // GET /v1/bakes/{id}, reads the pixels of the 3D views (not blank), checks the crowd's
 // levels against the daemon's own choice (GET /v1/bakes/{id}/level?px=), shows a refused
-// upload's and a refused bake's problem detail, and saves screenshots in OUTPUT_DIR.
+// upload's and a refused bake's problem detail, switches the clip of a bake of several
+// clips, and saves screenshots in OUTPUT_DIR.
 // The page runs under the daemon's Content-Security-Policy: every securitypolicyviolation
 // event and every console error fails the test (a probe first shows that a violation is
 // caught).
@@ -466,6 +467,54 @@ try {
     const circles = await page.$$eval('#error-curve circle', (cs) => cs.length);
     assert.equal(circles, 2 * bake.levels.length + vp.levels.length);
     await page.waitForFunction(() => window.motionlodViewer.crowdMembers.length > 0, null, { timeout: 120000 });
+  });
+
+  await check('a bake of several clips: the clip selector switches what the views and the crowd play', async () => {
+    const fox = path.join(sharedData, 'characters', 'Fox.glb');
+    const uploaded = await fetch(`${base}/v1/characters?filename=Fox.glb`, {
+      method: 'POST', headers: { 'Content-Type': 'application/octet-stream' }, body: fs.readFileSync(fox),
+    });
+    assert.ok(uploaded.status === 201 || uploaded.status === 200, `upload: ${uploaded.status}`);
+    const character = await uploaded.json();
+    const clips = ['Walk', 'Run'];
+    const multi = await bakeOverApi(base, { character: character.id, clips, levels: [character.joints, 12, 6] });
+    assert.deepEqual(multi.clips.map((clip) => clip.animation), clips);
+    // One clip's frames of the level for a height, as the daemon serves them.
+    for (const clip of multi.clips) {
+      const choice = await api(base, `/v1/bakes/${multi.id}/level?px=50&clip=${clip.animation}`);
+      assert.equal(choice.clip, clip.animation);
+      const level = await fetch(base + choice.url);
+      assert.equal(level.status, 200);
+    }
+    await page.goto(`${base}/`);
+    await page.waitForFunction((wanted) => [...document.querySelectorAll('#bake-list option')].some((o) => o.value === wanted), multi.id);
+    await page.selectOption('#bake-list', multi.id);
+    await page.waitForFunction((wanted) => window.motionlodViewer.state.bake?.id === wanted, multi.id, { timeout: 120000 });
+    assert.equal(await page.isVisible('#clip'), true, 'a bake of several clips shows the clip selector');
+    assert.deepEqual(await page.$$eval('#clip option', (options) => options.map((o) => o.value)), clips);
+    const playing = (clip) => page.waitForFunction((name) => {
+      const views = window.motionlodViewer.playing;
+      return views?.original === name && views?.level === name;
+    }, clip, { timeout: 120000 });
+    await playing('Walk');
+    await page.waitForFunction(() => window.motionlodViewer.crowdMembers.length > 0, null, { timeout: 120000 });
+    let members = await page.evaluate(() => window.motionlodViewer.crowdMembers);
+    assert.deepEqual([...new Set(members.map((m) => m.clip))].sort(), [...clips].sort(), 'the crowd plays every clip');
+    assert.equal(members[0].clip, 'Walk');
+
+    await page.selectOption('#clip', 'Run');
+    await playing('Run');
+    await page.waitForFunction(() => window.motionlodViewer.crowdMembers[0]?.clip === 'Run', null, { timeout: 120000 });
+    members = await page.evaluate(() => window.motionlodViewer.crowdMembers);
+    assert.deepEqual([...new Set(members.map((m) => m.clip))].sort(), [...clips].sort());
+    const start = await page.evaluate(() => window.motionlodViewer.compareFrames);
+    await page.waitForFunction((n) => window.motionlodViewer.compareFrames > n + 5, start, { timeout: 120000 });
+    for (const selector of ['#view-original', '#view-level', '#view-crowd']) {
+      const share = await drawnShare(page, selector);
+      assert.ok(share > 0.005, `${selector} is blank (${share})`);
+    }
+    assert.equal(await page.isHidden('#error'), true, await page.textContent('#error'));
+    await page.locator('#compare').screenshot({ path: path.join(outputDir, 'compare-clips.png') });
   });
 
   await check('a full page screenshot, no script errors and no policy violations', async () => {

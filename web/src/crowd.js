@@ -1,7 +1,8 @@
 // A crowd in the spirit of the paper's fig. 9: characters on a field receding from the
-// camera, each drawn with the level its on-screen height selects. Each level has a few
-// animated templates (phases of the clip); every character follows one of them and is an
-// instance of that template's skinned pose (see makeTemplates).
+// camera, each drawn with the level its on-screen height selects and playing one of the
+// bake's clips (round robin). Each level and clip has a few animated templates (phases of
+// the clip); every character follows one of them and is an instance of that template's
+// skinned pose (see makeTemplates).
 import * as THREE from 'three';
 import { clone as cloneSkinned } from 'three/addons/utils/SkeletonUtils.js';
 import { levelForPixels } from './level_choice.js';
@@ -23,27 +24,28 @@ export class CrowdView {
     this.scene.add(sun);
     this.camera = new THREE.PerspectiveCamera(40, canvas.width / canvas.height, 0.05, 2000);
     this.clock = new THREE.Clock();
-    this.templates = [];  // per level index: one template per phase (makeTemplates)
-    this.members = [];    // { level, joints, px, distance } per character
+    this.templates = new Map();  // "level/clip" -> one template per phase (makeTemplates)
+    this.members = [];           // { level, joints, px, distance, clip } per character
     this.field = new THREE.Group();
     this.scene.add(this.field);
     this.counts = new Map();
   }
 
-  // `levels`: the bake's level table; `levelGltfs`: level index -> its loaded glTF, or
-  // null (then the first loaded one stands in).
-  build({ levels, levelGltfs, animation, count, colourByLevel }) {
+  // `levels`: the bake's level table; `clips`: the clips the characters play in turn,
+  // each { name, levelGltfs: level index -> its loaded glTF of the clip, or null (then the
+  // first loaded one stands in) }.
+  build({ levels, clips, count, colourByLevel }) {
     this.scene.remove(this.field);
-    for (const phases of this.templates.filter(Boolean)) {
+    for (const phases of this.templates.values()) {
       for (const template of phases) for (const pose of template.poses) pose.geometry.dispose();
     }
     this.field = new THREE.Group();
     this.scene.add(this.field);
-    this.templates = [];
+    this.templates = new Map();
     this.members = [];
     this.counts = new Map();
 
-    const first = levelGltfs.find((gltf) => gltf);
+    const first = clips.flatMap((clip) => clip.levelGltfs).find((gltf) => gltf);
     if (!first) return;
     const { height } = measure(first.scene);
     // The camera stands 3 heights up and looks down the field; rows recede ever faster so
@@ -85,13 +87,16 @@ export class CrowdView {
     const followers = new Map();  // template -> [slot]
     slots.forEach((slot, k) => {
       const level = levelForPixels(levels, slot.px);
-      if (!this.templates[level.index]) {
-        this.templates[level.index] = this.makeTemplates(levelGltfs[level.index] || first, animation);
+      const clip = clips[k % clips.length];
+      const key = `${level.index}/${clip.name}`;
+      if (!this.templates.has(key)) {
+        const gltf = clip.levelGltfs[level.index] || clip.levelGltfs.find((g) => g) || first;
+        this.templates.set(key, this.makeTemplates(gltf, clip.name));
       }
-      const template = this.templates[level.index][k % kPhases];
+      const template = this.templates.get(key)[Math.floor(k / clips.length) % kPhases];
       if (!followers.has(template)) followers.set(template, { level: level.index, slots: [] });
       followers.get(template).slots.push(slot);
-      this.members.push({ level: level.index, joints: level.joints, px: slot.px, distance: slot.distance });
+      this.members.push({ level: level.index, joints: level.joints, px: slot.px, distance: slot.distance, clip: clip.name });
       this.counts.set(level.index, (this.counts.get(level.index) || 0) + 1);
     });
     const placement = new THREE.Object3D();
@@ -149,8 +154,7 @@ export class CrowdView {
 
   tick() {
     const dt = Math.min(this.clock.getDelta(), 0.1);
-    for (const phases of this.templates) {
-      if (!phases) continue;
+    for (const phases of this.templates.values()) {
       for (const template of phases) {
         template.mixer.update(dt);
         skinPoses(template);

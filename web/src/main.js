@@ -15,10 +15,12 @@ const state = {
   bake: null, // GET /v1/bakes/{id}
   report: null, // GET /v1/bakes/{id}/report
   levelIndex: 0,
-  levelBuffers: [], // per level index: its glTF export's bytes, or null
+  clip: '', // the clip the views play (an animation name of the bake)
+  levelBuffers: [], // per level index: its glTF export's bytes for the clip, or null
   originalBuffer: null, // the finest level's export (all joints when baked), else the uploaded .glb, else null
   originalJoints: null, // the joints of what the left view shows (null: nothing)
-  crowdGltfs: [], // per level index: a parsed export for the crowd's templates
+  crowdGltfs: [], // per level index: a parsed export of the clip for the crowd's templates
+  crowdClips: [], // the clips the crowd plays, round robin: { name, levelGltfs }
   exportError: '', // why the level exports could not be loaded
   busy: false,
 };
@@ -36,7 +38,13 @@ window.motionlodViewer = {
   state,
   get compareFrames() { return compare ? compare.frames : 0; },
   get crowdMembers() {
-    return crowd ? crowd.members.map(({ level, joints, px }) => ({ level, joints, px })) : [];
+    return crowd ? crowd.members.map(({ level, joints, px, clip }) => ({ level, joints, px, clip })) : [];
+  },
+  // The clip each view plays.
+  get playing() {
+    return compare
+      ? { original: compare.original.action?.getClip().name ?? null, level: compare.level.action?.getClip().name ?? null }
+      : null;
   },
   get viewBones() {
     return compare ? { original: compare.original.bones, level: compare.level.bones } : null;
@@ -111,6 +119,8 @@ async function showCharacter(character) {
     );
     select.append(option);
   }
+  // No motion in the request: the daemon bakes every motion of the character together.
+  if (motions.length > 1) select.append(new Option(`every animation together (${motions.length} clips)`, ''));
   $('bake-button').disabled = motions.length === 0;
   if (motions.length === 0) {
     showError(new ApiError(0, 'nothing to bake', 'this character has no animation: add a motion file (BVH, FBX, glTF)'));
@@ -121,12 +131,12 @@ async function addMotion(file) {
   if (!state.character || !file) return;
   clearError();
   try {
-    await uploadFiles(`/v1/motions?character=${state.character.id}`, [file], (fraction) =>
+    const { motions } = await uploadFiles(`/v1/motions?character=${state.character.id}`, [file], (fraction) =>
       setProgress(fraction, `uploading ${file.name}`),
     );
     setProgress(0, `${file.name} added`);
     await showCharacter(state.character);
-    $('motion').selectedIndex = $('motion').options.length - 1;
+    if (motions.length) $('motion').value = motions[0].id;
   } catch (error) {
     showError(error, `The motion ${file.name} was refused: `);
   }
@@ -150,7 +160,8 @@ async function bake() {
   state.busy = true;
   $('bake-button').disabled = true;
   try {
-    const request = { character: state.character.id, motion: $('motion').value, variant: $('variant').value };
+    const request = { character: state.character.id, variant: $('variant').value };
+    if ($('motion').value) request.motion = $('motion').value;
     const levels = parseLevels($('levels').value);
     if (levels.length) request.levels = levels;
     const job = await postJson('/v1/bakes', request);
@@ -194,6 +205,11 @@ async function openBake(bakeId) {
   for (const id of ['compare', 'curves', 'crowd']) $(id).hidden = false;
   fillRanking();
   await listBakes();
+  state.clip = bake.clips[0]?.animation ?? bake.animation;
+  const clips = $('clip');
+  clips.replaceChildren(...bake.clips.map((clip) =>
+    new Option(`${clip.animation} (${clip.frames} frames)`, clip.animation, false, clip.animation === state.clip)));
+  $('clip-field').hidden = bake.clips.length < 2;
 
   const slider = $('level-slider');
   slider.max = String(bake.levels.length - 1);
@@ -203,7 +219,18 @@ async function openBake(bakeId) {
   buildCrowd();
 }
 
-// Fetches every level's glTF export. The left view shows the original: the level with all
+// The crowd plays this many of a bake's clips at most, from the views' clip on.
+const kCrowdClips = 3;
+
+// Every level's glTF export of one clip, parsed (null where it failed).
+async function loadClipGltfs(clip) {
+  const { bake } = state;
+  return Promise.all(bake.levels.map((level) =>
+    fetchGlb(levelUrl(bake.id, level.joints, clip)).then(parseGlb).catch(() => null)));
+}
+
+// Fetches every level's glTF export of the chosen clip (and for the crowd, of the next
+// clips). The left view shows the original: the level with all
 // joints, else the uploaded file (when it is a glTF binary three.js can read as it is),
 // else, for a bake without that level (say levels 15,10,5) opened from the list, the
 // finest level baked, which the caption and the note then say.
@@ -213,7 +240,7 @@ async function loadLevels() {
   $('compare-note').textContent = 'loading the levels…';
   state.levelBuffers = await Promise.all(
     bake.levels.map((level) =>
-      fetchGlb(levelUrl(bake.id, level.joints)).catch((error) => {
+      fetchGlb(levelUrl(bake.id, level.joints, state.clip)).catch((error) => {
         state.exportError = `${error.title}${error.detail ? `: ${error.detail}` : ''}`;
         return null;
       }),
@@ -234,6 +261,11 @@ async function loadLevels() {
   }
   state.crowdGltfs = await Promise.all(state.levelBuffers.map((buffer) => (buffer ? parseGlb(buffer) : null)));
   if (!state.crowdGltfs.some(Boolean) && state.originalBuffer) state.crowdGltfs = [await parseGlb(state.originalBuffer)];
+  const chosen = Math.max(0, bake.clips.findIndex((clip) => clip.animation === state.clip));
+  const crowdClips = [];
+  for (let k = 0; k < Math.min(kCrowdClips, bake.clips.length); ++k) crowdClips.push(bake.clips[(chosen + k) % bake.clips.length].animation);
+  state.crowdClips = await Promise.all(crowdClips.map(async (name, k) =>
+    ({ name, levelGltfs: k === 0 ? state.crowdGltfs : await loadClipGltfs(name) })));
   const notes = [];
   if (state.exportError) notes.push(`Level export unavailable (${state.exportError}); the levels are shown with the original mesh.`);
   if (state.originalJoints !== null && state.originalJoints !== allJoints) {
@@ -244,7 +276,7 @@ async function loadLevels() {
   if (!compare) return;
   if (state.originalBuffer) {
     const original = await parseGlb(state.originalBuffer);
-    compare.show(compare.original, original, bake.animation, jointCount(original));
+    compare.show(compare.original, original, state.clip, jointCount(original));
     $('caption-original').textContent = state.originalJoints === allJoints
       ? `original: ${allJoints} joints`
       : `finest level baked: ${state.originalJoints} of ${allJoints} joints`;
@@ -288,9 +320,18 @@ async function showLevel(index) {
   if (!compare || !buffer) return;
   const gltf = await parseGlb(buffer);
   if (state.levelIndex === index) {
-    compare.show(compare.level, gltf, bake.animation, jointCount(gltf));
+    compare.show(compare.level, gltf, state.clip, jointCount(gltf));
     $('caption-level').textContent = `level ${index}: ${level.joints} joints`;
   }
+}
+
+// The views and the crowd play another clip of the bake: its levels' exports.
+async function showClip(name) {
+  if (!state.bake || name === state.clip) return;
+  state.clip = name;
+  await loadLevels();
+  await showLevel(state.levelIndex);
+  buildCrowd();
 }
 
 // ---- 4. Curves and priorities -------------------------------------------------------
@@ -315,9 +356,10 @@ function drawBakeCurves() {
   for (const [variant, points] of Object.entries(report.variant_curves || {})) {
     add(variant, points, 'mean_E', 'baseline_mean_E');
   }
-  // Other succeeded bakes of the same character and motion: more variants on one plot.
+  // Other succeeded bakes of the same character and clips: more variants on one plot.
+  const clipsOf = (b) => b.clips.map((clip) => clip.motion).join();
   for (const other of otherBakes) {
-    if (other.motion !== bake.motion || other.state !== 'succeeded' || !other.levels.length) continue;
+    if (clipsOf(other) !== clipsOf(bake) || other.state !== 'succeeded' || !other.levels.length) continue;
     add(other.variant, other.levels, 'mean_E', null);
   }
   drawCurves($('error-curve'), series, bake.levels[state.levelIndex]?.joints ?? null);
@@ -350,8 +392,7 @@ function buildCrowd() {
   if (!crowd || !state.bake) return;
   crowd.build({
     levels: state.bake.levels,
-    levelGltfs: state.crowdGltfs,
-    animation: state.bake.animation,
+    clips: state.crowdClips,
     count: Math.max(10, Math.min(1000, Number($('crowd-count').value) || 300)),
     colourByLevel: $('crowd-colour').checked,
   });
@@ -381,7 +422,8 @@ async function listBakes() {
     const chosen = state.bake?.id || '';
     select.replaceChildren(new Option(bakes.length ? '(choose)' : '(none yet)', ''));
     for (const b of bakes) {
-      select.append(new Option(`${b.animation} · ${b.variant} · ${b.state} · ${b.id.slice(0, 8)}`, b.id, false, b.id === chosen));
+      const clips = b.clips.length > 1 ? `${b.clips.length} clips` : b.animation;
+      select.append(new Option(`${clips} · ${b.variant} · ${b.state} · ${b.id.slice(0, 8)}`, b.id, false, b.id === chosen));
     }
   } catch (error) {
     showError(error, 'Listing the bakes: ');
@@ -418,6 +460,9 @@ function wire() {
   });
   $('level-slider').addEventListener('input', (event) => {
     showLevel(Number(event.target.value)).catch((error) => showError(error, 'Level: '));
+  });
+  $('clip').addEventListener('change', (event) => {
+    showClip(event.target.value).catch((error) => showError(error, 'Clip: '));
   });
   $('crowd-count').addEventListener('change', buildCrowd);
   $('crowd-colour').addEventListener('change', buildCrowd);

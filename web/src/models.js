@@ -5,8 +5,9 @@ import { ApiError, authHeaders } from './api.js';
 
 const loader = new GLTFLoader();
 
-export function levelUrl(bakeId, joints) {
-  return `/v1/bakes/${bakeId}/levels/${joints}.glb`;
+// The level keeping `joints` joints, playing the clip named `clip` (the first when empty).
+export function levelUrl(bakeId, joints, clip = '') {
+  return `/v1/bakes/${bakeId}/levels/${joints}.glb${clip ? `?clip=${encodeURIComponent(clip)}` : ''}`;
 }
 
 // Fetches a GLB from the daemon; failures become ApiErrors with the problem's detail.
@@ -37,7 +38,7 @@ export function jointCount(gltf) {
   return bones.size;
 }
 
-// The clip to play: the one named like the bake's animation, else the first.
+// The clip to play: the one named `animation` (a clip of the bake), else the first.
 export function pickClip(gltf, animation) {
   return gltf.animations.find((clip) => clip.name === animation) || gltf.animations[0] || null;
 }
