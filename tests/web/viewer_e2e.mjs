@@ -490,7 +490,8 @@ try {
     await page.waitForFunction((wanted) => [...document.querySelectorAll('#bake-list option')].some((o) => o.value === wanted), multi.id);
     await page.selectOption('#bake-list', multi.id);
     await page.waitForFunction((wanted) => window.motionlodViewer.state.bake?.id === wanted, multi.id, { timeout: 120000 });
-    assert.equal(await page.isVisible('#clip'), true, 'a bake of several clips shows the clip selector');
+    // A bake of several clips shows the clip selector once its clips are listed.
+    await page.waitForSelector('#clip', { state: 'visible', timeout: 120000 });
     assert.deepEqual(await page.$$eval('#clip option', (options) => options.map((o) => o.value)), clips);
     const playing = (clip) => page.waitForFunction((name) => {
       const views = window.motionlodViewer.playing;
