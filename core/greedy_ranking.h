@@ -6,15 +6,15 @@
 //
 // Each step scores every candidate (a kept joint, never the root or a locked one) by
 // solving the level without it on the probe frames as PreparedMotion::SolveLevel does (the
-// variant's solution, or the reparented level where the solution is worse),
-// up to probe_frames_per_clip evenly spaced frames of each clip (0: all), and taking its
-// maximum vertex error; the lowest wins, ties by the lower mean E, then the higher joint
-// index (GreedyPick: values within kGreedyTieTolerance of each other tie, so that the
-// order does not follow rounding, in which the machine versions of core/simd.h differ,
-// between symmetric joints). Two savings change no choice: the candidate that scored best at the last step is
-// scored first, and every other candidate's maximum is only decided against its (the
-// search stops at the first vertex past it, core/internal/max_vertex_error.h), found
-// exactly only where it is within it.
+// variant's solution, or the reparented level where the solution is worse), up to
+// probe_frames_per_clip evenly spaced frames of each clip (0: all), and taking its maximum
+// vertex error; the lowest wins, ties by the lower mean E, then the higher joint index
+// (GreedyPick: values within kGreedyTieTolerance of each other tie, so that the order
+// between symmetric joints does not follow the rounding in which the machine versions of
+// core/simd.h differ). Two savings change no choice: the candidate that scored best at the
+// last step is scored first, and every other candidate's maximum is only decided against
+// its (the search stops at the first vertex past it, core/internal/max_vertex_error.h),
+// found exactly only where it is within it.
 // The naive reference, every candidate scored by PreparedMotion::SolveLevel, is
 // core/reference/greedy_ranking_reference.h.
 #pragma once
