@@ -54,7 +54,8 @@ StatusOr<Score> ScoreLevel(const internal::PreparedData& probe, const ReducedSke
     }
     internal::EvaluateErrors(probe, delta, level.kept_joints, figures, errors);
     if (figures == internal::Figures::kQuadratic) {
-      internal::EvaluateErrors(probe, delta, level.kept_joints, internal::Figures::kMaxVertexError, errors);
+      internal::EvaluateErrors(probe, delta, level.kept_joints, internal::Figures::kMaxVertexError,
+                               errors);
     }
     return errors;
   };
@@ -74,10 +75,12 @@ StatusOr<Score> ScoreLevel(const internal::PreparedData& probe, const ReducedSke
   }
   // The reparented level bounds what is written: the solution counts only within it.
   const LevelErrors base = *decide(reparented, kInfinity, internal::Figures::kAll);
-  const auto own = decide(solved, std::min(bound_pct, base.max_vertex_error_pct), internal::Figures::kAll);
+  const auto own =
+      decide(solved, std::min(bound_pct, base.max_vertex_error_pct), internal::Figures::kAll);
   const bool solution_written = own && internal::NoWorseThan(*own, base);
   const LevelErrors& written = solution_written ? *own : base;
-  if (written.max_vertex_error_pct > bound_pct) return Score{written.max_vertex_error_pct, kInfinity, true};
+  if (written.max_vertex_error_pct > bound_pct)
+    return Score{written.max_vertex_error_pct, kInfinity, true};
   return Score{written.max_vertex_error_pct, written.mean_e, false};
 }
 
@@ -108,8 +111,9 @@ std::vector<int> ProbeFrames(std::span<const MotionClip> clips, int per_clip) {
     }
     // Evenly spaced from the first frame to the last.
     for (int i = 0; i < per_clip; ++i) {
-      frames.push_back(clip.first_frame +
-                       static_cast<int>(static_cast<int64_t>(i) * (clip.frame_count - 1) / (per_clip - 1)));
+      frames.push_back(
+          clip.first_frame +
+          static_cast<int>(static_cast<int64_t>(i) * (clip.frame_count - 1) / (per_clip - 1)));
     }
   }
   return frames;
@@ -118,11 +122,13 @@ std::vector<int> ProbeFrames(std::span<const MotionClip> clips, int per_clip) {
 Status GreedyRankingJob::Validate() const {
   if (prepared == nullptr) return InvalidArgument("GreedyRankingJob: no prepared motion");
   if (probe_frames_per_clip < 0) {
-    return InvalidArgument("GreedyRankingJob: probe_frames_per_clip must be >= 0 (0 = every frame)");
+    return InvalidArgument(
+        "GreedyRankingJob: probe_frames_per_clip must be >= 0 (0 = every frame)");
   }
   std::string unknown;
   for (const std::string& name : locked_joints) {
-    if (prepared->character().FindJoint(name) < 0) unknown += (unknown.empty() ? "'" : ", '") + name + "'";
+    if (prepared->character().FindJoint(name) < 0)
+      unknown += (unknown.empty() ? "'" : ", '") + name + "'";
   }
   if (!unknown.empty()) return NotFound("locked joints not in the skeleton: " + unknown);
   return Status::Ok();
@@ -132,8 +138,8 @@ StatusOr<JointRanking> GreedyRankingJob::Run(const PieceRunner& run) const {
   if (Status status = Validate(); !status.ok()) return status;
   const Character& c = prepared->character();
   const int n = c.joint_count();
-  auto probe = internal::SelectFrames(
-      prepared->data(), ProbeFrames(prepared->clips(), probe_frames_per_clip));
+  auto probe = internal::SelectFrames(prepared->data(),
+                                      ProbeFrames(prepared->clips(), probe_frames_per_clip));
   if (!probe.ok()) return probe.status();
   const internal::PreparedData& d = (*probe)->data();
 

@@ -13,8 +13,8 @@ namespace motionlod::core {
 StatusOr<JointRanking> GreedyRankingReference(const GreedyRankingJob& job) {
   const Character& c = job.prepared->character();
   const int n = c.joint_count();
-  auto probe = internal::SelectFrames(job.prepared->data(),
-                                      ProbeFrames(job.prepared->clips(), job.probe_frames_per_clip));
+  auto probe = internal::SelectFrames(
+      job.prepared->data(), ProbeFrames(job.prepared->clips(), job.probe_frames_per_clip));
   if (!probe.ok()) return probe.status();
   JointRanking ranking;
   ranking.priority.assign(n, std::numeric_limits<double>::infinity());
@@ -31,12 +31,12 @@ StatusOr<JointRanking> GreedyRankingReference(const GreedyRankingJob& job) {
       for (int k = 0; k < n; ++k) flags[k] = keep[k] && k != j;
       auto level = ReduceSkeleton(c, std::span<const bool>(flags.get(), n));
       if (!level.ok()) return level.status();
-      auto errors = job.reparented ? (*probe)->BaselineErrors(*level)
-                                   : [&]() -> StatusOr<LevelErrors> {
-                                       auto solved = (*probe)->SolveLevel(*level);
-                                       if (!solved.ok()) return solved.status();
-                                       return solved->optimized;
-                                     }();
+      auto errors =
+          job.reparented ? (*probe)->BaselineErrors(*level) : [&]() -> StatusOr<LevelErrors> {
+        auto solved = (*probe)->SolveLevel(*level);
+        if (!solved.ok()) return solved.status();
+        return solved->optimized;
+      }();
       if (!errors.ok()) return errors.status();
       joints.push_back(j);
       max_pct.push_back(errors->max_vertex_error_pct);
