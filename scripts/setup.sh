@@ -9,6 +9,7 @@ packages=(
   libeigen3-dev libassimp-dev nlohmann-json3-dev libspdlog-dev libcli11-dev libssl-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   libcpp-httplib-dev libsqlite3-dev libtomlplusplus-dev zlib1g-dev libxxhash-dev
+  libmeshoptimizer-dev  # simplified meshes of far levels (core/simplify_mesh.cc)
   chromium  # the web viewer's end-to-end test drives it (never a downloaded browser)
   bubblewrap libseccomp-dev  # the import worker's sandbox and its seccomp filter (server/import_sandbox.h)
   clang libclang-rt-14-dev  # libFuzzer targets (scripts/fuzz.sh)

@@ -1,0 +1,166 @@
+// The honest error of a level (core/level_deviation.h).
+#include "core/level_deviation.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <string>
+
+#include "core/pose_rate.h"
+
+namespace motionlod::core {
+namespace {
+
+constexpr int kFramesPerPiece = 8;
+
+struct Partial {  // one clip's figures over some of its frames
+  double max = -1, weighted_sum = 0;
+  int max_frame = 0, max_vertex = 0;
+};
+
+}  // namespace
+
+Status LevelDeviationJob::Validate() const {
+  if (prepared == nullptr || level == nullptr || influences == nullptr) {
+    return InvalidArgument("LevelDeviationJob: no prepared motion, level or influences");
+  }
+  const Character& character = prepared->character();
+  const int p = character.vertex_count(), m = level->kept_count();
+  if (static_cast<int>(level->joint_to_slot.size()) != character.joint_count()) {
+    return InvalidArgument("LevelDeviationJob: the level is of another skeleton");
+  }
+  const int level_vertices = mesh != nullptr ? static_cast<int>(mesh->vertices.size()) : p;
+  if (mesh != nullptr) {
+    if (mesh->correspondence.size() != static_cast<size_t>(p)) {
+      return InvalidArgument(
+          "LevelDeviationJob: the mesh's correspondence is not the character's vertices");
+    }
+    for (const SurfacePoint& point : mesh->correspondence) {
+      for (uint32_t v : point.vertices) {
+        if (v >= static_cast<uint32_t>(level_vertices)) {
+          return InvalidArgument(
+              "LevelDeviationJob: a surface point names a vertex the mesh does not have");
+        }
+      }
+    }
+  }
+  const int k = influences->per_vertex;
+  if (k < 1 || influences->slots.size() != static_cast<size_t>(level_vertices) * k ||
+      influences->weights.size() != influences->slots.size()) {
+    return InvalidArgument("LevelDeviationJob: the influences are not one row per level vertex");
+  }
+  for (uint16_t slot : influences->slots) {
+    if (slot >= m)
+      return InvalidArgument(
+          "LevelDeviationJob: an influence names a slot the level does not keep");
+  }
+  if (frame_stride < 1 || frame_stride > kMaxFrameStride) {
+    return InvalidArgument("LevelDeviationJob: the frame stride must be 1 to " +
+                           std::to_string(kMaxFrameStride));
+  }
+  size_t stored = 0;
+  for (const MotionClip& clip : prepared->clips())
+    stored += StoredFrameCount(clip.frame_count, frame_stride);
+  if (stored_matrices.size() != stored * m) {
+    return InvalidArgument("LevelDeviationJob: " + std::to_string(stored_matrices.size()) +
+                           " stored matrices, expected " + std::to_string(stored * m));
+  }
+  return Status::Ok();
+}
+
+StatusOr<LevelDeviation> LevelDeviationJob::Run(const PieceRunner& run) const {
+  if (Status status = Validate(); !status.ok()) return status;
+  const Character& character = prepared->character();
+  const RawSkin& skin = character.skin();
+  const int p = character.vertex_count(), m = level->kept_count(), k = influences->per_vertex;
+  const int frames = prepared->frame_count();
+  const std::span<const MotionClip> clips = prepared->clips();
+  const Eigen::MatrixXd& kt = prepared->original_matrices();
+  const std::vector<double>& areas = character.vertex_areas();
+  const double total_area = std::accumulate(areas.begin(), areas.end(), 0.0);
+  const int level_vertices = mesh != nullptr ? static_cast<int>(mesh->vertices.size()) : p;
+  auto original_id = [&](int v) {
+    return mesh != nullptr ? static_cast<int>(mesh->vertices[v]) : v;
+  };
+  std::vector<int> clip_of(static_cast<size_t>(frames));
+  for (size_t c = 0; c < clips.size(); ++c) {
+    std::fill_n(clip_of.begin() + clips[c].first_frame, clips[c].frame_count, static_cast<int>(c));
+  }
+
+  const int pieces = (frames + kFramesPerPiece - 1) / kFramesPerPiece;
+  std::vector<std::vector<Partial>> partials(static_cast<size_t>(pieces),
+                                             std::vector<Partial>(clips.size()));
+  RunPieces(run, pieces, [&](int piece) {
+    std::vector<RowMajorAffine34f> played(static_cast<size_t>(m));
+    std::vector<Vec3f> posed(static_cast<size_t>(level_vertices));
+    for (int t = piece * kFramesPerPiece; t < std::min(frames, (piece + 1) * kFramesPerPiece);
+         ++t) {
+      PlayFrame(stored_matrices, m, clips, frame_stride, t, rigid, played);
+      for (int v = 0; v < level_vertices; ++v) {
+        const Vec3f rest = skin.positions[original_id(v)];
+        Vec3f sum = Vec3f::Zero();
+        for (int e = 0; e < k; ++e) {
+          const size_t entry = static_cast<size_t>(v) * k + e;
+          const RowMajorAffine34f& matrix = played[influences->slots[entry]];
+          sum += influences->weights[entry] * (matrix.leftCols<3>() * rest + matrix.col(3));
+        }
+        posed[v] = sum;
+      }
+      Partial& partial = partials[piece][clip_of[t]];
+      for (int i = 0; i < p; ++i) {
+        const Eigen::Vector4d rest(skin.positions[i].x(), skin.positions[i].y(),
+                                   skin.positions[i].z(), 1.0);
+        Vec3d original = Vec3d::Zero();
+        for (uint32_t e = skin.influence_offsets[i]; e < skin.influence_offsets[i + 1]; ++e) {
+          original += skin.influence_weights[e] *
+                      (kt.block<4, 3>(4 * skin.influence_joints[e], 3 * t).transpose() * rest);
+        }
+        Vec3d drawn;
+        if (mesh != nullptr) {
+          const SurfacePoint& point = mesh->correspondence[i];
+          drawn = (point.weights[0] * posed[point.vertices[0]] +
+                   point.weights[1] * posed[point.vertices[1]] +
+                   point.weights[2] * posed[point.vertices[2]])
+                      .cast<double>();
+        } else {
+          drawn = posed[i].cast<double>();
+        }
+        const double error = (drawn - original).norm();
+        partial.weighted_sum += areas[i] * error;
+        if (error > partial.max) {
+          partial.max = error;
+          partial.max_frame = t - clips[clip_of[t]].first_frame;
+          partial.max_vertex = i;
+        }
+      }
+    }
+  });
+
+  const double to_pct = 100.0 / character.height();
+  LevelDeviation out;
+  out.max_pct = -1;
+  for (size_t c = 0; c < clips.size(); ++c) {
+    Partial merged;
+    for (const auto& piece : partials) {
+      merged.weighted_sum += piece[c].weighted_sum;
+      if (piece[c].max > merged.max)
+        merged =
+            Partial{piece[c].max, merged.weighted_sum, piece[c].max_frame, piece[c].max_vertex};
+    }
+    LevelDeviation clip;
+    clip.max_pct = merged.max * to_pct;
+    clip.mean_pct = merged.weighted_sum / (total_area * clips[c].frame_count) * to_pct;
+    clip.max_frame = merged.max_frame;
+    clip.max_vertex = merged.max_vertex;
+    out.mean_pct = std::max(out.mean_pct, clip.mean_pct);
+    if (clip.max_pct > out.max_pct) {
+      out.max_pct = clip.max_pct;
+      out.max_frame = clips[c].first_frame + clip.max_frame;
+      out.max_vertex = clip.max_vertex;
+    }
+    out.per_clip.push_back(clip);
+  }
+  return out;
+}
+
+}  // namespace motionlod::core
