@@ -14,8 +14,8 @@ namespace {
 constexpr int kFramesPerPiece = 8;
 
 struct Partial {  // one clip's figures over some of its frames
-  double max = -1, weighted_sum = 0;
-  int max_frame = 0, max_vertex = 0;
+  double max = 0, weighted_sum = 0;
+  int frames = 0, max_frame = 0, max_vertex = 0;
 };
 
 }  // namespace
@@ -54,6 +54,7 @@ Status LevelDeviationJob::Validate() const {
       return InvalidArgument(
           "LevelDeviationJob: an influence names a slot the level does not keep");
   }
+  if (frame_step < 1) return InvalidArgument("LevelDeviationJob: the frame step must be positive");
   if (frame_stride < 1 || frame_stride > kMaxFrameStride) {
     return InvalidArgument("LevelDeviationJob: the frame stride must be 1 to " +
                            std::to_string(kMaxFrameStride));
@@ -107,6 +108,7 @@ StatusOr<LevelDeviation> LevelDeviationJob::Run(const PieceRunner& run) const {
         posed[v] = sum;
       }
       Partial& partial = partials[piece][clip_of[t]];
+      ++partial.frames;
       for (int i = 0; i < p; ++i) {
         const Eigen::Vector4d rest(skin.positions[i].x(), skin.positions[i].y(),
                                    skin.positions[i].z(), 1.0);
@@ -138,22 +140,26 @@ StatusOr<LevelDeviation> LevelDeviationJob::Run(const PieceRunner& run) const {
 
   const double to_pct = 100.0 / character.height();
   LevelDeviation out;
-  out.max_pct = -1;
   for (size_t c = 0; c < clips.size(); ++c) {
     Partial merged;
     for (const auto& piece : partials) {
-      merged.weighted_sum += piece[c].weighted_sum;
-      if (piece[c].max > merged.max)
-        merged =
-            Partial{piece[c].max, merged.weighted_sum, piece[c].max_frame, piece[c].max_vertex};
+      const Partial& part = piece[c];
+      if (part.max > merged.max) {
+        merged.max = part.max;
+        merged.max_frame = part.max_frame;
+        merged.max_vertex = part.max_vertex;
+      }
+      merged.weighted_sum += part.weighted_sum;
+      merged.frames += part.frames;
     }
     LevelDeviation clip;
     clip.max_pct = merged.max * to_pct;
-    clip.mean_pct = merged.weighted_sum / (total_area * clips[c].frame_count) * to_pct;
+    clip.mean_pct =
+        merged.frames > 0 ? merged.weighted_sum / (total_area * merged.frames) * to_pct : 0;
     clip.max_frame = merged.max_frame;
     clip.max_vertex = merged.max_vertex;
     out.mean_pct = std::max(out.mean_pct, clip.mean_pct);
-    if (clip.max_pct > out.max_pct) {
+    if (c == 0 || clip.max_pct > out.max_pct) {
       out.max_pct = clip.max_pct;
       out.max_frame = clips[c].first_frame + clip.max_frame;
       out.max_vertex = clip.max_vertex;

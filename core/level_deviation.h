@@ -38,6 +38,9 @@ struct LevelDeviationJob {
   std::span<const RowMajorAffine34f> stored_matrices;
   int frame_stride = 1;
   bool rigid = false;  // interpolation: slerp and lerp, else lerp
+  // Every frame_step-th frame of the motion only (1: every frame, the honest figure); a
+  // search's probe. Take it prime to the strides tried, so the probe sees played frames.
+  int frame_step = 1;
 
   Status Validate() const;
   // Pieces of frames run on `run` (base/pieces.h); the result does not depend on it.

@@ -3,13 +3,21 @@
 
 #include <meshoptimizer.h>
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <string>
+#include <tuple>
+#include <utility>
 
 namespace motionlod::core {
 namespace {
+
+constexpr float kShareStep = 0.25f;
+// How much farther than the nearest point a corresponding point may be, in heights.
+constexpr double kCorrespondenceSlack = 0.01;
 
 // The closest point to p on triangle (a, b, c), as barycentric weights (Ericson, Real-Time
 // Collision Detection, 5.1.5).
@@ -64,19 +72,64 @@ StatusOr<LevelMesh> SimplifyMeshJob::Run() const {
   if (Status status = Validate(); !status.ok()) return status;
   const RawSkin& skin = character->skin();
   const size_t p = skin.positions.size();
+  // Each triangle belongs to a part of the skin (SkinSplit); a vertex of triangles of
+  // several parts, and the copies of a vertex at one position (a flat-shaded mesh), become
+  // one vertex per part, which meshoptimizer keeps as a seam. Collapses then stay within a
+  // part: the bind pose alone cannot tell that a vertex on a straight edge between two
+  // joints' parts bends with them.
+  std::map<std::tuple<float, float, float, int64_t>, uint32_t> split_of;
+  std::vector<uint32_t> original_of;
+  std::vector<Vec3f> split_positions;
   std::vector<uint32_t> indices;
   indices.reserve(3 * skin.triangles.size());
-  for (const auto& triangle : skin.triangles)
-    indices.insert(indices.end(), triangle.begin(), triangle.end());
-  const float* positions = skin.positions.data()->data();
-  const float scale = meshopt_simplifyScale(positions, p, sizeof(Vec3f));
+  std::map<int, float> weight_of_joint;
+  for (const auto& triangle : skin.triangles) {
+    weight_of_joint.clear();
+    for (uint32_t v : triangle) {
+      for (uint32_t e = skin.influence_offsets[v]; e < skin.influence_offsets[v + 1]; ++e) {
+        weight_of_joint[skin.influence_joints[e]] += skin.influence_weights[e];
+      }
+    }
+    // The two joints with the most weight and the first's share, in steps of kShareStep.
+    std::pair<int, float> first{-1, 0.0f}, second{-1, 0.0f};
+    float total = 0;
+    for (const auto& [joint, weight] : weight_of_joint) {
+      total += weight;
+      if (weight > first.second) {
+        second = first;
+        first = {joint, weight};
+      } else if (weight > second.second) {
+        second = {joint, weight};
+      }
+    }
+    const int share = static_cast<int>(std::lround(first.second / total / kShareStep));
+    const int64_t region =
+        (static_cast<int64_t>(first.first) * 65536 + (second.first + 1)) * 64 + share;
+    for (uint32_t v : triangle) {
+      const Vec3f& at = skin.positions[v];
+      const auto [it, inserted] =
+          split_of.try_emplace({at.x(), at.y(), at.z(),
+                                split == SkinSplit::kNone            ? 0
+                                : split == SkinSplit::kDominantJoint ? first.first
+                                                                     : region},
+                               static_cast<uint32_t>(original_of.size()));
+      if (inserted) {
+        original_of.push_back(v);
+        split_positions.push_back(skin.positions[v]);
+      }
+      indices.push_back(it->second);
+    }
+  }
+  const float* positions = split_positions.data()->data();
+  const float scale = meshopt_simplifyScale(positions, split_positions.size(), sizeof(Vec3f));
   std::vector<uint32_t> simplified(indices.size());
   float relative_error = 0;
   const size_t target_indices = std::min(indices.size(), 3 * static_cast<size_t>(target_triangles));
   simplified.resize(meshopt_simplify(simplified.data(), indices.data(), indices.size(), positions,
-                                     p, sizeof(Vec3f), target_indices,
+                                     split_positions.size(), sizeof(Vec3f), target_indices,
                                      static_cast<float>(target_error / std::max(scale, 1e-30f)), 0,
                                      &relative_error));
+  for (uint32_t& v : simplified) v = original_of[v];
   if (simplified.empty()) {
     return InvalidArgument("SimplifyMeshJob: the simplification left no triangle");
   }
@@ -91,72 +144,88 @@ StatusOr<LevelMesh> SimplifyMeshJob::Run() const {
       mesh.vertices.push_back(v);
     }
   }
-  std::vector<std::vector<uint32_t>> triangles_of(
-      mesh.vertices.size());  // level vertex -> level triangles
   for (size_t e = 0; e < simplified.size(); e += 3) {
     const auto triangle = std::array<uint32_t, 3>{
         level_index[simplified[e]], level_index[simplified[e + 1]], level_index[simplified[e + 2]]};
-    for (uint32_t corner : triangle)
-      triangles_of[corner].push_back(static_cast<uint32_t>(mesh.triangles.size()));
     mesh.triangles.push_back(triangle);
   }
 
-  // Each removed vertex: breadth first along the original edges until kept vertices are
-  // found, then the nearest point on the simplified triangles around them.
-  std::vector<std::vector<uint32_t>> neighbours(p);
-  for (const auto& t : skin.triangles) {
-    for (int a = 0; a < 3; ++a) {
-      neighbours[t[a]].push_back(t[(a + 1) % 3]);
-      neighbours[t[a]].push_back(t[(a + 2) % 3]);
-    }
+  // Each removed vertex: a point of the simplified bind-pose surface near it that moves as
+  // it does. Pieces of a mesh need not share edges and often pass close to other pieces
+  // (a robot's torso through its head), so the nearest point may follow other joints: of
+  // the points within kCorrespondenceSlack of the nearest, the one whose interpolated
+  // weights differ least from the vertex's (L1) wins. Triangles whose bounding box is
+  // farther than that skipped.
+  std::vector<Eigen::AlignedBox3f> boxes;
+  boxes.reserve(mesh.triangles.size());
+  for (const auto& corners : mesh.triangles) {
+    Eigen::AlignedBox3f box;
+    for (uint32_t corner : corners) box.extend(skin.positions[mesh.vertices[corner]]);
+    boxes.push_back(box);
   }
+  const float slack =
+      static_cast<float>(std::max(2 * mesh.bind_error, kCorrespondenceSlack * character->height()));
+  auto weight_difference = [&](uint32_t v, const std::array<uint32_t, 3>& corners,
+                               const std::array<float, 3>& w) {
+    // sum_j |w_vj - sum_c w_c w_{corner c, j}|: every joint of the vertex or a corner.
+    float difference = 0;
+    auto weight_in = [&](uint32_t u, int joint) {
+      for (uint32_t e = skin.influence_offsets[u]; e < skin.influence_offsets[u + 1]; ++e) {
+        if (skin.influence_joints[e] == joint) return skin.influence_weights[e];
+      }
+      return 0.0f;
+    };
+    auto add_joint = [&](int joint, bool seen_before) {
+      if (seen_before) return;
+      float blended = 0;
+      for (int c = 0; c < 3; ++c) blended += w[c] * weight_in(mesh.vertices[corners[c]], joint);
+      difference += std::abs(weight_in(v, joint) - blended);
+    };
+    std::array<int, 64> seen{};
+    int seen_count = 0;
+    auto visit = [&](uint32_t u) {
+      for (uint32_t e = skin.influence_offsets[u]; e < skin.influence_offsets[u + 1]; ++e) {
+        const int joint = skin.influence_joints[e];
+        const bool before =
+            std::find(seen.begin(), seen.begin() + seen_count, joint) != seen.begin() + seen_count;
+        add_joint(joint, before);
+        if (!before && seen_count < static_cast<int>(seen.size())) seen[seen_count++] = joint;
+      }
+    };
+    visit(v);
+    for (int c = 0; c < 3; ++c) visit(mesh.vertices[corners[c]]);
+    return difference;
+  };
   mesh.correspondence.resize(p);
-  std::vector<uint32_t> visited_at(p, kRemoved), frontier, next, found;
   for (uint32_t v = 0; v < p; ++v) {
     if (level_index[v] != kRemoved) {
       mesh.correspondence[v] = {{level_index[v], level_index[v], level_index[v]}, {1, 0, 0}};
       continue;
     }
-    found.clear();
-    frontier.assign(1, v);
-    visited_at[v] = v;
-    // The ring where kept vertices first appear and the one after it.
-    for (int extra_rings = -1; !frontier.empty() && extra_rings < 1;) {
-      next.clear();
-      for (uint32_t u : frontier) {
-        for (uint32_t w : neighbours[u]) {
-          if (visited_at[w] == v) continue;
-          visited_at[w] = v;
-          next.push_back(w);
-          if (level_index[w] != kRemoved) found.push_back(level_index[w]);
-        }
-      }
-      frontier.swap(next);
-      if (!found.empty()) ++extra_rings;
+    const Vec3f& at = skin.positions[v];
+    auto closest = [&](size_t t) {
+      const auto& corners = mesh.triangles[t];
+      const Vec3f& a = skin.positions[mesh.vertices[corners[0]]];
+      const Vec3f& b = skin.positions[mesh.vertices[corners[1]]];
+      const Vec3f& c = skin.positions[mesh.vertices[corners[2]]];
+      const std::array<float, 3> w = ClosestOnTriangle(at, a, b, c);
+      return std::pair(w, (w[0] * a + w[1] * b + w[2] * c - at).norm());
+    };
+    float nearest = std::numeric_limits<float>::infinity();
+    for (size_t t = 0; t < mesh.triangles.size(); ++t) {
+      if (boxes[t].exteriorDistance(at) >= nearest) continue;
+      nearest = std::min(nearest, closest(t).second);
     }
-    if (found.empty()) {  // a piece of the mesh with no kept vertex: the nearest kept one
-      float nearest = std::numeric_limits<float>::infinity();
-      for (uint32_t s = 0; s < mesh.vertices.size(); ++s) {
-        const float d = (skin.positions[mesh.vertices[s]] - skin.positions[v]).squaredNorm();
-        if (d < nearest) {
-          nearest = d;
-          found.assign(1, s);
-        }
-      }
-    }
-    float best = std::numeric_limits<float>::infinity();
-    for (uint32_t s : found) {
-      for (uint32_t t : triangles_of[s]) {
-        const auto& corners = mesh.triangles[t];
-        const Vec3f& a = skin.positions[mesh.vertices[corners[0]]];
-        const Vec3f& b = skin.positions[mesh.vertices[corners[1]]];
-        const Vec3f& c = skin.positions[mesh.vertices[corners[2]]];
-        const std::array<float, 3> w = ClosestOnTriangle(skin.positions[v], a, b, c);
-        const float d = (w[0] * a + w[1] * b + w[2] * c - skin.positions[v]).squaredNorm();
-        if (d < best) {
-          best = d;
-          mesh.correspondence[v] = {corners, w};
-        }
+    float best = std::numeric_limits<float>::infinity(), best_distance = 0;
+    for (size_t t = 0; t < mesh.triangles.size(); ++t) {
+      if (boxes[t].exteriorDistance(at) > nearest + slack) continue;
+      const auto [w, distance] = closest(t);
+      if (distance > nearest + slack) continue;
+      const float difference = weight_difference(v, mesh.triangles[t], w);
+      if (difference < best || (difference == best && distance < best_distance)) {
+        best = difference;
+        best_distance = distance;
+        mesh.correspondence[v] = {mesh.triangles[t], w};
       }
     }
   }

@@ -35,12 +35,22 @@ struct LevelMesh {
   double bind_error = 0;
 };
 
+// The parts of the skin a simplification keeps apart (their borders become seams).
+enum class SkinSplit {
+  kNone,           // one surface
+  kDominantJoint,  // a part per joint: triangles by the joint with the most weight
+  // A part per band of blending: the two joints with the most weight and the first's share
+  // in steps of a quarter, so that collapses also stay within a blend.
+  kWeightBands,
+};
+
 struct SimplifyMeshJob {
   const Character* character = nullptr;
   // Stop at this many triangles or more (the original's at most) ...
   int target_triangles = 0;
   // ... or where the next collapse would move the surface by more than this (length).
   double target_error = 0;
+  SkinSplit split = SkinSplit::kDominantJoint;
 
   Status Validate() const;
   StatusOr<LevelMesh> Run() const;
