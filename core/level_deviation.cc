@@ -13,6 +13,16 @@ namespace {
 
 constexpr int kFramesPerPiece = 8;
 
+// sum_e weights[e] K_{joints[e]} [rest; 1] over `count` influences, in float as a skinner
+// blends: the matrices first, then one transform.
+template <typename Index>
+Vec3f SkinPoint(const std::vector<RowMajorAffine34f>& palette, const Index* joints,
+                const float* weights, int count, const Vec3f& rest) {
+  RowMajorAffine34f blend = weights[0] * palette[joints[0]];
+  for (int e = 1; e < count; ++e) blend += weights[e] * palette[joints[e]];
+  return blend.leftCols<3>() * rest + blend.col(3);
+}
+
 struct Partial {  // one clip's figures over some of its frames
   double max = 0, weighted_sum = 0;
   int frames = 0, max_frame = 0, max_vertex = 0;
@@ -73,7 +83,8 @@ StatusOr<LevelDeviation> LevelDeviationJob::Run(const PieceRunner& run) const {
   if (Status status = Validate(); !status.ok()) return status;
   const Character& character = prepared->character();
   const RawSkin& skin = character.skin();
-  const int p = character.vertex_count(), m = level->kept_count(), k = influences->per_vertex;
+  const int p = character.vertex_count(), n = character.joint_count(), m = level->kept_count();
+  const int k = influences->per_vertex;
   const int frames = prepared->frame_count();
   const std::span<const MotionClip> clips = prepared->clips();
   const Eigen::MatrixXd& kt = prepared->original_matrices();
@@ -92,31 +103,29 @@ StatusOr<LevelDeviation> LevelDeviationJob::Run(const PieceRunner& run) const {
   std::vector<std::vector<Partial>> partials(static_cast<size_t>(pieces),
                                              std::vector<Partial>(clips.size()));
   RunPieces(run, pieces, [&](int piece) {
-    std::vector<RowMajorAffine34f> played(static_cast<size_t>(m));
+    std::vector<RowMajorAffine34f> played(static_cast<size_t>(m)),
+        original_palette(static_cast<size_t>(n));
     std::vector<Vec3f> posed(static_cast<size_t>(level_vertices));
     for (int t = piece * kFramesPerPiece; t < std::min(frames, (piece + 1) * kFramesPerPiece);
          ++t) {
+      if (t % frame_step != 0) continue;
       PlayFrame(stored_matrices, m, clips, frame_stride, t, rigid, played);
+      for (int j = 0; j < n; ++j)
+        original_palette[j] = kt.block<4, 3>(4 * j, 3 * t).transpose().cast<float>();
       for (int v = 0; v < level_vertices; ++v) {
-        const Vec3f rest = skin.positions[original_id(v)];
-        Vec3f sum = Vec3f::Zero();
-        for (int e = 0; e < k; ++e) {
-          const size_t entry = static_cast<size_t>(v) * k + e;
-          const RowMajorAffine34f& matrix = played[influences->slots[entry]];
-          sum += influences->weights[entry] * (matrix.leftCols<3>() * rest + matrix.col(3));
-        }
-        posed[v] = sum;
+        const size_t row = static_cast<size_t>(v) * k;
+        posed[v] = SkinPoint(played, &influences->slots[row], &influences->weights[row], k,
+                             skin.positions[original_id(v)]);
       }
       Partial& partial = partials[piece][clip_of[t]];
       ++partial.frames;
       for (int i = 0; i < p; ++i) {
-        const Eigen::Vector4d rest(skin.positions[i].x(), skin.positions[i].y(),
-                                   skin.positions[i].z(), 1.0);
-        Vec3d original = Vec3d::Zero();
-        for (uint32_t e = skin.influence_offsets[i]; e < skin.influence_offsets[i + 1]; ++e) {
-          original += skin.influence_weights[e] *
-                      (kt.block<4, 3>(4 * skin.influence_joints[e], 3 * t).transpose() * rest);
-        }
+        const uint32_t first = skin.influence_offsets[i];
+        const Vec3d original =
+            SkinPoint(original_palette, &skin.influence_joints[first],
+                      &skin.influence_weights[first],
+                      static_cast<int>(skin.influence_offsets[i + 1] - first), skin.positions[i])
+                .cast<double>();
         Vec3d drawn;
         if (mesh != nullptr) {
           const SurfacePoint& point = mesh->correspondence[i];

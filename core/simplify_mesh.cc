@@ -53,6 +53,54 @@ std::array<float, 3> ClosestOnTriangle(const Vec3f& p, const Vec3f& a, const Vec
   return {1 - v - w, v, w};
 }
 
+// The triangles' bounding boxes in a uniform grid, so that a vertex looks at the cells
+// around it, ring after ring, rather than at every triangle.
+struct TriangleGrid {
+  static constexpr int kCellsPerAxis = 32;
+  Eigen::AlignedBox3f bounds;
+  float cell = 1;
+  Eigen::Array3i dims = Eigen::Array3i::Ones();
+  std::vector<std::vector<uint32_t>> cells;
+
+  explicit TriangleGrid(const std::vector<Eigen::AlignedBox3f>& boxes) {
+    for (const auto& box : boxes) bounds.extend(box);
+    cell = std::max(bounds.sizes().maxCoeff() / kCellsPerAxis, 1e-20f);
+    dims = ((bounds.sizes().array() / cell).ceil().cast<int>()).max(1).min(kCellsPerAxis);
+    cells.resize(static_cast<size_t>(dims.prod()));
+    for (uint32_t t = 0; t < boxes.size(); ++t) {
+      const Eigen::Array3i low = CellOf(boxes[t].min()), high = CellOf(boxes[t].max());
+      for (int z = low.z(); z <= high.z(); ++z) {
+        for (int y = low.y(); y <= high.y(); ++y) {
+          for (int x = low.x(); x <= high.x(); ++x) cells[Index(x, y, z)].push_back(t);
+        }
+      }
+    }
+  }
+  Eigen::Array3i CellOf(const Vec3f& point) const {
+    return ((point - bounds.min()).array() / cell).floor().cast<int>().max(0).min(dims - 1);
+  }
+  size_t Index(int x, int y, int z) const {
+    return (static_cast<size_t>(z) * dims.y() + y) * dims.x() + x;
+  }
+  int max_ring() const { return dims.maxCoeff(); }
+  // Calls visit(t) for every triangle listed in the cells at Chebyshev distance `ring`
+  // from `home` (a triangle may come more than once).
+  template <typename Visit>
+  void VisitRing(const Eigen::Array3i& home, int ring, Visit&& visit) const {
+    const Eigen::Array3i low = (home - ring).max(0), high = (home + ring).min(dims - 1);
+    for (int z = low.z(); z <= high.z(); ++z) {
+      for (int y = low.y(); y <= high.y(); ++y) {
+        for (int x = low.x(); x <= high.x(); ++x) {
+          const int distance =
+              std::max({std::abs(x - home.x()), std::abs(y - home.y()), std::abs(z - home.z())});
+          if (distance != ring) continue;
+          for (uint32_t t : cells[Index(x, y, z)]) visit(t);
+        }
+      }
+    }
+  }
+};
+
 }  // namespace
 
 Status SimplifyMeshJob::Validate() const {
@@ -150,6 +198,21 @@ StatusOr<LevelMesh> SimplifyMeshJob::Run() const {
     mesh.triangles.push_back(triangle);
   }
 
+  mesh.correspondence =
+      SurfaceCorrespondence(*character, mesh.vertices, mesh.triangles, mesh.bind_error);
+  return mesh;
+}
+
+std::vector<SurfacePoint> SurfaceCorrespondence(const Character& character,
+                                                std::span<const uint32_t> vertices,
+                                                std::span<const std::array<uint32_t, 3>> triangles,
+                                                double bind_error) {
+  const RawSkin& skin = character.skin();
+  const size_t p = skin.positions.size();
+  constexpr uint32_t kRemoved = std::numeric_limits<uint32_t>::max();
+  std::vector<uint32_t> level_index(p, kRemoved);
+  for (uint32_t s = 0; s < vertices.size(); ++s) level_index[vertices[s]] = s;
+  std::vector<SurfacePoint> correspondence(p);
   // Each removed vertex: a point of the simplified bind-pose surface near it that moves as
   // it does. Pieces of a mesh need not share edges and often pass close to other pieces
   // (a robot's torso through its head), so the nearest point may follow other joints: of
@@ -157,14 +220,17 @@ StatusOr<LevelMesh> SimplifyMeshJob::Run() const {
   // weights differ least from the vertex's (L1) wins. Triangles whose bounding box is
   // farther than that skipped.
   std::vector<Eigen::AlignedBox3f> boxes;
-  boxes.reserve(mesh.triangles.size());
-  for (const auto& corners : mesh.triangles) {
+  boxes.reserve(triangles.size());
+  for (const auto& corners : triangles) {
     Eigen::AlignedBox3f box;
-    for (uint32_t corner : corners) box.extend(skin.positions[mesh.vertices[corner]]);
+    for (uint32_t corner : corners) box.extend(skin.positions[vertices[corner]]);
     boxes.push_back(box);
   }
+  const TriangleGrid grid(boxes);
+  std::vector<uint32_t> visited(triangles.size(), 0);
+  uint32_t stamp = 0;
   const float slack =
-      static_cast<float>(std::max(2 * mesh.bind_error, kCorrespondenceSlack * character->height()));
+      static_cast<float>(std::max(2 * bind_error, kCorrespondenceSlack * character.height()));
   auto weight_difference = [&](uint32_t v, const std::array<uint32_t, 3>& corners,
                                const std::array<float, 3>& w) {
     // sum_j |w_vj - sum_c w_c w_{corner c, j}|: every joint of the vertex or a corner.
@@ -178,7 +244,7 @@ StatusOr<LevelMesh> SimplifyMeshJob::Run() const {
     auto add_joint = [&](int joint, bool seen_before) {
       if (seen_before) return;
       float blended = 0;
-      for (int c = 0; c < 3; ++c) blended += w[c] * weight_in(mesh.vertices[corners[c]], joint);
+      for (int c = 0; c < 3; ++c) blended += w[c] * weight_in(vertices[corners[c]], joint);
       difference += std::abs(weight_in(v, joint) - blended);
     };
     std::array<int, 64> seen{};
@@ -193,43 +259,50 @@ StatusOr<LevelMesh> SimplifyMeshJob::Run() const {
       }
     };
     visit(v);
-    for (int c = 0; c < 3; ++c) visit(mesh.vertices[corners[c]]);
+    for (int c = 0; c < 3; ++c) visit(vertices[corners[c]]);
     return difference;
   };
-  mesh.correspondence.resize(p);
   for (uint32_t v = 0; v < p; ++v) {
     if (level_index[v] != kRemoved) {
-      mesh.correspondence[v] = {{level_index[v], level_index[v], level_index[v]}, {1, 0, 0}};
+      correspondence[v] = {{level_index[v], level_index[v], level_index[v]}, {1, 0, 0}};
       continue;
     }
     const Vec3f& at = skin.positions[v];
     auto closest = [&](size_t t) {
-      const auto& corners = mesh.triangles[t];
-      const Vec3f& a = skin.positions[mesh.vertices[corners[0]]];
-      const Vec3f& b = skin.positions[mesh.vertices[corners[1]]];
-      const Vec3f& c = skin.positions[mesh.vertices[corners[2]]];
+      const auto& corners = triangles[t];
+      const Vec3f& a = skin.positions[vertices[corners[0]]];
+      const Vec3f& b = skin.positions[vertices[corners[1]]];
+      const Vec3f& c = skin.positions[vertices[corners[2]]];
       const std::array<float, 3> w = ClosestOnTriangle(at, a, b, c);
       return std::pair(w, (w[0] * a + w[1] * b + w[2] * c - at).norm());
     };
+    const Eigen::Array3i home = grid.CellOf(at);
     float nearest = std::numeric_limits<float>::infinity();
-    for (size_t t = 0; t < mesh.triangles.size(); ++t) {
-      if (boxes[t].exteriorDistance(at) >= nearest) continue;
-      nearest = std::min(nearest, closest(t).second);
+    for (int ring = 0; ring <= grid.max_ring() && !(nearest <= ring * grid.cell); ++ring) {
+      grid.VisitRing(home, ring, [&](uint32_t t) {
+        if (boxes[t].exteriorDistance(at) < nearest) nearest = std::min(nearest, closest(t).second);
+      });
     }
     float best = std::numeric_limits<float>::infinity(), best_distance = 0;
-    for (size_t t = 0; t < mesh.triangles.size(); ++t) {
-      if (boxes[t].exteriorDistance(at) > nearest + slack) continue;
-      const auto [w, distance] = closest(t);
-      if (distance > nearest + slack) continue;
-      const float difference = weight_difference(v, mesh.triangles[t], w);
-      if (difference < best || (difference == best && distance < best_distance)) {
-        best = difference;
-        best_distance = distance;
-        mesh.correspondence[v] = {mesh.triangles[t], w};
-      }
+    const int reach = static_cast<int>(std::ceil((nearest + slack) / grid.cell));
+    ++stamp;
+    for (int ring = 0; ring <= std::min(reach, grid.max_ring()); ++ring) {
+      grid.VisitRing(home, ring, [&](uint32_t t) {
+        if (visited[t] == stamp) return;
+        visited[t] = stamp;
+        if (boxes[t].exteriorDistance(at) > nearest + slack) return;
+        const auto [w, distance] = closest(t);
+        if (distance > nearest + slack) return;
+        const float difference = weight_difference(v, triangles[t], w);
+        if (difference < best || (difference == best && distance < best_distance)) {
+          best = difference;
+          best_distance = distance;
+          correspondence[v] = {triangles[t], w};
+        }
+      });
     }
   }
-  return mesh;
+  return correspondence;
 }
 
 StatusOr<std::shared_ptr<const Character>> SubsetCharacter(const Character& character,

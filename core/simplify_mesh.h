@@ -10,6 +10,7 @@
 #include <array>
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <vector>
 
 #include "base/status.h"
@@ -55,6 +56,14 @@ struct SimplifyMeshJob {
   Status Validate() const;
   StatusOr<LevelMesh> Run() const;
 };
+
+// LevelMesh::correspondence for a level mesh of `character` given by its vertices (original
+// ids, ascending) and triangles (indices into them), `bind_error` its simplification's
+// (length): what a reader of a level file measures a level against.
+std::vector<SurfacePoint> SurfaceCorrespondence(const Character& character,
+                                                std::span<const uint32_t> vertices,
+                                                std::span<const std::array<uint32_t, 3>> triangles,
+                                                double bind_error);
 
 // The character on the vertices of `mesh` only, with its triangles (the areas that weight
 // the solve are the simplified surface's): what a simplified level is solved on. Vertex s
