@@ -75,7 +75,7 @@ int Main(int argc, char** argv) {
       const double px = level.deviation.max_pct > 0 ? 100.0 / level.deviation.max_pct : INFINITY;
       std::printf("%-28s %7.0f | %6d %6d %6d %5.2f %3d %7.3f %6.3f\n", file.filename().c_str(), px,
                   level.skeleton.kept_count(), level.vertex_count(character),
-                  level.triangle_count(character), level.influences.mean_used(), level.frame_stride,
+                  level.triangle_count(character), level.mean_influences, level.frame_stride,
                   level.deviation.max_pct, level.cost);
     }
     std::printf("%-28s ladder in %.2f s\n", file.filename().c_str(), seconds);

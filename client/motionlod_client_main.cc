@@ -106,15 +106,16 @@ void PrintLevels(const api::BakeInfo& bake) {
     }
   }
   if (bake.levels.empty()) return;
-  std::printf("%5s %6s %10s %10s %17s  %s\n", "level", "joints", "max err %", "px (1 px)",
-              "chosen for px", "hash");
+  std::printf("%5s %6s %6s %6s %5s %3s %6s %10s %10s %17s  %s\n", "level", "joints", "verts", "tris",
+              "infl", "r", "cost", "max err %", "px (1 px)", "chosen for px", "hash");
   for (const api::LevelEntry& level : bake.levels) {
     const std::string limit =
         level.max_px_for_1px_error ? std::to_string(std::lround(*level.max_px_for_1px_error)) : "exact";
     // A level no height picks (a coarser level is as accurate) has no range.
     const std::string range =
         level.chosen && level.px_min ? PixelRange(*level.px_min, level.px_max) : "never";
-    std::printf("%5d %6d %10.3f %10s %17s  %s\n", level.index, level.joints,
+    std::printf("%5d %6d %6d %6d %5.2f %3d %6.3f %10.3f %10s %17s  %s\n", level.index, level.joints,
+                level.vertices, level.triangles, level.mean_influences, level.frame_stride, level.cost,
                 level.max_vertex_error_pct, limit.c_str(), range.c_str(), level.hash.c_str());
   }
 }

@@ -12,7 +12,6 @@
 #include "core/baseline_sequence.h"
 #include "core/greedy_ranking.h"
 #include "core/reduce_skeleton.h"
-#include "core/smallest_level.h"
 #include "core/skinning.h"
 #include "io/retarget.h"
 #include "pipeline/report.h"
@@ -39,15 +38,13 @@ Status CancelledStatus() { return Status(StatusCode::kCancelled, "the bake was c
 Status BakeRequest::Validate() const {
   if (!character) return InvalidArgument("no character to bake");
   if (Status status = settings.Validate(); !status.ok()) return status;
-  if (!(fps >= 0) || fps > 1000) return InvalidArgument("fps must be in [0, 1000] (0 = the source's)");
+  if (!(fps >= 0) || fps > 1000)
+    return InvalidArgument("fps must be in [0, 1000] (0 = the source's)");
   for (int count : levels) {
     if (count < 1) return InvalidArgument("every level must keep at least one joint");
   }
   if (all_levels && !levels.empty()) {
     return InvalidArgument("ask for explicit levels or for all levels, not both");
-  }
-  if (!(smallest_useful_error_pct > 0)) {
-    return InvalidArgument("smallest_useful_error_pct must be positive");
   }
   // Bake starts its pool's threads up front.
   if (threads < 0 || threads > kMaxThreads) {
@@ -58,13 +55,15 @@ Status BakeRequest::Validate() const {
 }
 
 Status SolveLevelsJob::Validate() const {
-  if (!prepared || ranking == nullptr) return InvalidArgument("SolveLevelsJob: no prepared motion or ranking");
+  if (!prepared || ranking == nullptr)
+    return InvalidArgument("SolveLevelsJob: no prepared motion or ranking");
   const int n = prepared->character().joint_count();
   for (size_t index = 0; index < counts.size(); ++index) {
     if (counts[index] < ranking->locked_count || counts[index] > n ||
         (index > 0 && counts[index] >= counts[index - 1])) {
       return InvalidArgument("SolveLevelsJob: the counts must decrease within [" +
-                             std::to_string(ranking->locked_count) + ", " + std::to_string(n) + "]");
+                             std::to_string(ranking->locked_count) + ", " + std::to_string(n) +
+                             "]");
     }
   }
   return Status::Ok();
@@ -148,7 +147,8 @@ StatusOr<std::map<int, core::LevelResult>> SolveLevelsJob::Run(TaskPool& pool) c
   return out;
 }
 
-Status LiftCoarserLevels(const core::PreparedMotion& prepared, std::map<int, core::LevelResult>& levels) {
+Status LiftCoarserLevels(const core::PreparedMotion& prepared,
+                         std::map<int, core::LevelResult>& levels) {
   for (auto coarser = levels.begin(); coarser != levels.end() && std::next(coarser) != levels.end();
        ++coarser) {
     if (Status status = prepared.LiftCoarserLevel(coarser->second, std::next(coarser)->second);
@@ -157,30 +157,6 @@ Status LiftCoarserLevels(const core::PreparedMotion& prepared, std::map<int, cor
     }
   }
   return Status::Ok();
-}
-
-std::pair<int, int> SmallestLevelBracket(const std::map<int, double>& max_error_pct, int minimum,
-                                         int joint_count, double bound_pct) {
-  int lo = minimum, hi = joint_count;
-  for (const auto& [count, error] : max_error_pct) {
-    if (error <= bound_pct) {
-      hi = std::min(hi, count);
-    } else {
-      lo = std::max(lo, count + 1);
-    }
-  }
-  return {std::min(lo, hi), hi};
-}
-
-std::vector<int> DefaultLadder(int joint_count, int minimum) {
-  const int n = joint_count;
-  std::vector<int> ladder = {n, static_cast<int>(std::lround(0.75 * n)),
-                             static_cast<int>(std::lround(0.5 * n)),
-                             static_cast<int>(std::lround(0.25 * n))};
-  for (int& count : ladder) count = std::clamp(count, std::min(minimum, n), n);
-  std::sort(ladder.begin(), ladder.end(), std::greater<>());
-  ladder.erase(std::unique(ladder.begin(), ladder.end()), ladder.end());
-  return ladder;
 }
 
 namespace {
@@ -221,10 +197,12 @@ StatusOr<BakeInputs> PrepareInputsOn(const BakeRequest& request, TaskPool& pool)
         warned.push_back(source.motion.get());
         const std::string from = source.label.empty() ? "the motion" : "'" + source.label + "'";
         for (const std::string& name : retargeted->unmatched_target_joints) {
-          motion_warnings.push_back("joint '" + name + "' has no match in " + from + ": it keeps its bind pose");
+          motion_warnings.push_back("joint '" + name + "' has no match in " + from +
+                                    ": it keeps its bind pose");
         }
         for (const std::string& name : retargeted->unmatched_source_joints) {
-          motion_warnings.push_back(from + "'s joint '" + name + "' matches no joint of the character");
+          motion_warnings.push_back(from + "'s joint '" + name +
+                                    "' matches no joint of the character");
         }
       } else {
         auto motion = character_asset.SampleAnimation(source.animation, request.fps, pool.Runner());
@@ -242,9 +220,9 @@ StatusOr<BakeInputs> PrepareInputsOn(const BakeRequest& request, TaskPool& pool)
     size_t matrices = 0;
     for (const core::Motion& clip : clips) matrices += clip.joint_world.size();
     if (matrices > kMaxClipMatrices) {
-      motion_status = InvalidArgument("the clips hold " + std::to_string(matrices) +
-                                      " joint matrices together, more than " +
-                                      std::to_string(kMaxClipMatrices) + ": bake fewer clips at once");
+      motion_status = InvalidArgument(
+          "the clips hold " + std::to_string(matrices) + " joint matrices together, more than " +
+          std::to_string(kMaxClipMatrices) + ": bake fewer clips at once");
       return;
     }
     auto joined = core::ConcatenateClips(clips);
@@ -264,7 +242,8 @@ StatusOr<BakeInputs> PrepareInputsOn(const BakeRequest& request, TaskPool& pool)
 }  // namespace
 
 std::vector<ClipSource> EveryClipOf(const io::Asset& character,
-                                    std::shared_ptr<const io::Asset> source, const std::string& label) {
+                                    std::shared_ptr<const io::Asset> source,
+                                    const std::string& label) {
   const io::Asset& file = source ? *source : character;
   std::vector<ClipSource> clips;
   for (const io::AnimationInfo& animation : file.animations()) {
@@ -279,7 +258,8 @@ StatusOr<BakeInputs> PrepareInputs(const BakeRequest& request) {
   TaskPool pool(request.threads);
   auto inputs = PrepareInputsOn(request, pool);
   if (!inputs.ok()) return inputs.status();
-  if (Status status = core::ValidateMotion(inputs->motion, *inputs->character, request.simd); !status.ok()) {
+  if (Status status = core::ValidateMotion(inputs->motion, *inputs->character, request.simd);
+      !status.ok()) {
     return status;
   }
   return inputs;
@@ -290,7 +270,8 @@ double SkinningPassSeconds(const core::Character& character, const core::Motion&
   const int n = character.joint_count();
   const int p = character.vertex_count();
   std::vector<core::Affine34d> inverse_bind(n);
-  for (int j = 0; j < n; ++j) inverse_bind[j] = core::InverseAffine(character.skeleton().bind_world[j]);
+  for (int j = 0; j < n; ++j)
+    inverse_bind[j] = core::InverseAffine(character.skeleton().bind_world[j]);
   const int workers = std::max(1, std::min(ResolveThreads(threads), motion.frame_count));
   struct Scratch {
     std::vector<core::Affine34f> palette;
@@ -346,8 +327,9 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
       2,
       [&](int task) {
         if (task == 0) {
-          ranked = core::RankJointsJob{&character, &motion, request.locked_joints, request.simd}.Run(
-              pool.Runner());
+          ranked =
+              core::RankJointsJob{&character, &motion, request.locked_joints, request.simd}.Run(
+                  pool.Runner());
           ranking_done = true;
         } else {
           created = core::PreparedMotion::Create(inputs->character, motion, request.settings,
@@ -390,8 +372,6 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
       }
       counts.push_back(count);
     }
-  } else {
-    counts = DefaultLadder(n, minimum);
   }
   std::sort(counts.begin(), counts.end(), std::greater<>());
   counts.erase(std::unique(counts.begin(), counts.end()), counts.end());
@@ -402,44 +382,55 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
   int solved_count = 0;
   const auto on_level_done = [&](int) {
     ++solved_count;
-    report_progress(solve_begin + (solve_end - solve_begin) * solved_count /
-                                      std::max<size_t>(counts.size() + (default_ladder ? 1 : 0), 1),
-                    "solve");
+    report_progress(
+        solve_begin + (solve_end - solve_begin) * solved_count / std::max<size_t>(counts.size(), 1),
+        "solve");
   };
-  const auto solve = [&](std::vector<int> levels, const std::function<void(int)>& on_done) -> Status {
+  const auto solve = [&](std::vector<int> levels,
+                         const std::function<void(int)>& on_done) -> Status {
     auto levels_solved =
         SolveLevelsJob{*prepared, &*ranking, std::move(levels), on_done, cancel}.Run(pool);
     if (!levels_solved.ok()) return levels_solved.status();
     solved.merge(*levels_solved);
     return Status::Ok();
   };
-  if (Status status = solve(counts, on_level_done); !status.ok()) return status;
+  std::vector<CostLevel> ladder;
   if (default_ladder) {
-    // The smallest useful skeleton: the fewest joints whose optimised maximum vertex error
-    // is within the bound. The ladder's exact errors bracket it; the search narrows the
-    // bracket (core/smallest_level.h), and the level it finds is solved on every frame.
-    const double bound = request.smallest_useful_error_pct;
-    std::map<int, double> max_error_pct;
-    for (const auto& [count, result] : solved) max_error_pct[count] = result.optimized.max_vertex_error_pct;
-    const auto [lo, hi] = SmallestLevelBracket(max_error_pct, minimum, n, bound);
+    // Levels by cost: the cheapest within 1 px at each height of the ladder (its own mesh,
+    // influences and pose rate), then each level's skeleton solved on the whole mesh for
+    // the report's E and baseline figures.
+    report_progress(0.1, "levels by cost");
+    CostLadderJob job;
+    job.prepared = *prepared;
+    job.motion = &motion;
+    job.ranking = ranking;
+    job.simd = request.simd;
+    job.parts = request.level_parts;
+    auto built = job.Run(pool);
+    if (!built.ok()) return built.status();
+    ladder = *std::move(built);
     if (Cancelled(cancel)) return CancelledStatus();
-    auto found = core::SmallestLevelJob{prepared->get(), ranking, lo, hi, bound}.Run();
-    if (!found.ok()) return found.status();
-    if (!solved.count(*found)) {
-      if (Status status = solve({*found}, {}); !status.ok()) return status;
-      counts.push_back(*found);
-      std::sort(counts.begin(), counts.end(), std::greater<>());
-    }
-    on_level_done(static_cast<int>(solved.size()));
+    counts.clear();
+    for (const CostLevel& level : ladder) counts.push_back(level.skeleton.kept_count());
+    std::sort(counts.begin(), counts.end(), std::greater<>());
+    counts.erase(std::unique(counts.begin(), counts.end()), counts.end());
   }
-
-  if (Status status = LiftCoarserLevels(**prepared, solved); !status.ok()) return status;
+  if (Status status = solve(counts, on_level_done); !status.ok()) return status;
+  if (!default_ladder) {
+    if (Status status = LiftCoarserLevels(**prepared, solved); !status.ok()) return status;
+    for (int count : counts) ladder.push_back(SkeletonLevel(character, solved.at(count)));
+  }
+  std::vector<BakedLevel> baked;
+  for (CostLevel& level : ladder) {
+    const core::LevelResult* skeleton = &solved.at(level.skeleton.kept_count());
+    baked.push_back({std::move(level), skeleton});
+  }
 
   // Fig. 7: the four variants at every level, errors only.
   std::vector<VariantCurve> curves;
   if (request.variant_curves) {
-    for (core::Variant variant : {core::Variant::kVP, core::Variant::kVPNO, core::Variant::kVPPD,
-                                  core::Variant::kVPNOPD}) {
+    for (core::Variant variant :
+         {core::Variant::kVP, core::Variant::kVPNO, core::Variant::kVPPD, core::Variant::kVPNOPD}) {
       core::SolveSettings settings = request.settings;
       settings.variant = variant;
       auto variant_prepared = core::PreparedMotion::Create(inputs->character, motion, settings,
@@ -456,8 +447,8 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
       VariantCurve curve{variant, {}};
       for (int count : every) {
         const core::LevelResult& r = results.at(count);
-        curve.points.push_back({count, r.optimized.mean_e, r.baseline.mean_e,
-                                r.optimized.max_vertex_error_pct});
+        curve.points.push_back(
+            {count, r.optimized.mean_e, r.baseline.mean_e, r.optimized.max_vertex_error_pct});
       }
       curves.push_back(std::move(curve));
       report_progress(solve_end + 0.35 * curves.size() / 4.0, "variant curves");
@@ -466,18 +457,25 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
   if (Cancelled(cancel)) return CancelledStatus();
 
   report_progress(0.96, "encode");
-  auto encoded = EncodeSolvedLevels(character, motion, request.settings, request.source_hash,
-                                    counts, solved, pool.Runner());
+  auto encoded = EncodeBakedLevels(character, motion, request.settings, request.source_hash, baked,
+                                   pool.Runner());
   if (!encoded.ok()) return encoded.status();
   const double bake_seconds = SecondsSince(start);
 
   report_progress(0.98, "measure");
-  const ReportInputs report_inputs{request,       character, motion, *ranking, *paper_ranking, **prepared,
-                                   counts,        solved,    curves,  bake_seconds,
-                                   request.measure_skinning_pass
-                                       ? SkinningPassSeconds(character, motion, threads)
-                                       : 0.0,
-                                   threads,       inputs->warnings};
+  const ReportInputs report_inputs{
+      request,
+      character,
+      motion,
+      *ranking,
+      *paper_ranking,
+      **prepared,
+      baked,
+      curves,
+      bake_seconds,
+      request.measure_skinning_pass ? SkinningPassSeconds(character, motion, threads) : 0.0,
+      threads,
+      inputs->warnings};
 
   BakeOutput output;
   output.level_set = std::move(*encoded);

@@ -22,6 +22,7 @@
 #include "core/simd.h"
 #include "core/solve_levels.h"
 #include "io/asset.h"
+#include "pipeline/cost_levels.h"
 #include "pipeline/task_pool.h"
 
 namespace motionlod::pipeline {
@@ -37,27 +38,30 @@ struct ClipSource {
 // Every animation of `source` (null: `character`'s own file), in the file's order; one
 // unnamed clip (the first, which sampling then finds missing) where it has none.
 std::vector<ClipSource> EveryClipOf(const io::Asset& character,
-                                    std::shared_ptr<const io::Asset> source, const std::string& label);
+                                    std::shared_ptr<const io::Asset> source,
+                                    const std::string& label);
 
 struct BakeRequest {
   std::shared_ptr<const io::Asset> character;
   // The clips baked together, in this order: one reduced skeleton per level for all of
   // them, matrices and figures per clip. Empty = every animation of the character's file.
   std::vector<ClipSource> clips;
-  double fps = 0;         // 0 = the source's rate
-  // Kept joint counts, any order; empty = the default ladder (full, ~3/4, ~1/2, ~1/4 and
-  // the smallest useful skeleton). all_levels: every count from n down to the minimum.
+  double fps = 0;  // 0 = the source's rate
+  // Kept joint counts, any order (levels of the skeleton alone: the whole mesh, its own
+  // influences, every frame); empty = the levels by cost (pipeline/cost_levels.h: the
+  // cheapest within 1 px at each of a spread of heights). all_levels: every count from n
+  // down to the minimum.
   std::vector<int> levels;
   bool all_levels = false;
   std::vector<std::string> locked_joints;  // never removed (sockets, IK targets)
   core::RankingMethod ranking_method = core::RankingMethod::kGreedy;
+  // What the default ladder's levels may cut (pipeline/cost_levels.h): everything unless a
+  // part is switched off.
+  CostLevelParts level_parts;
   core::SolveSettings settings;
   // The machine version of the core's hot loops (core/simd.h): the programs read it from
   // MOTIONLOD_SIMD.
   core::SimdChoice simd = core::SimdChoice::kWidest;
-  // The smallest useful skeleton is the fewest joints whose optimised maximum vertex
-  // error stays within this percentage of the character's height.
-  double smallest_useful_error_pct = 10.0;
   // Also solve the four variants at every level (errors only) for the fig. 7 plot.
   bool variant_curves = false;
   static constexpr int kMaxThreads = 256;
@@ -67,7 +71,7 @@ struct BakeRequest {
   // costs a sixth to a third of the bake again, outside bake_seconds.
   bool measure_skinning_pass = true;
   std::array<uint8_t, 32> source_hash{};  // SHA-256 of the inputs, stored in the level set
-  std::string character_label;  // for the report (the file's name)
+  std::string character_label;            // for the report (the file's name)
 
   Status Validate() const;
 };
@@ -80,8 +84,8 @@ struct BakeProgress {
 using ProgressCallback = std::function<void(const BakeProgress&)>;
 
 struct BakeOutput {
-  std::string level_set;   // proto level-set file
-  nlohmann::json report;   // report.json
+  std::string level_set;  // proto level-set file
+  nlohmann::json report;  // report.json
   std::vector<std::string> warnings;
 };
 
@@ -125,20 +129,7 @@ struct SolveLevelsJob {
 
 // Coarsest first, each level of nested `levels` (keyed by count) made no worse than the
 // next coarser one (PreparedMotion::LiftCoarserLevel): adding joints never raises the error.
-Status LiftCoarserLevels(const core::PreparedMotion& prepared, std::map<int, core::LevelResult>& levels);
-
-// The counts the smallest useful level is searched between, from solved levels' maximum
-// vertex errors (count -> percent of the height): at most the fewest joints found within
-// the bound (n without one), at least one more than the most found over it (the fewest a
-// level may keep without one). A larger level over the bound than a smaller one within
-// it (errors need not fall as joints are added) leaves nothing to search: both ends are
-// the smaller one.
-std::pair<int, int> SmallestLevelBracket(const std::map<int, double>& max_error_pct, int minimum,
-                                         int joint_count, double bound_pct);
-
-// The default ladder for n joints and the minimum the locks allow: n, ~3n/4, ~n/2, ~n/4,
-// clamped to [minimum, n], duplicates removed, finest first (the smallest useful level is
-// added by Bake once it is known).
-std::vector<int> DefaultLadder(int joint_count, int minimum);
+Status LiftCoarserLevels(const core::PreparedMotion& prepared,
+                         std::map<int, core::LevelResult>& levels);
 
 }  // namespace motionlod::pipeline

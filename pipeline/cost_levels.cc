@@ -7,6 +7,7 @@
 
 #include "core/pose_rate.h"
 #include "core/reduce_skeleton.h"
+#include "core/smallest_level.h"
 
 namespace motionlod::pipeline {
 namespace {
@@ -32,14 +33,6 @@ double MeanInfluences(const core::RawSkin& skin) {
          static_cast<double>(skin.positions.size());
 }
 
-int MostInfluences(const core::RawSkin& skin) {
-  uint32_t most = 1;
-  for (size_t i = 0; i + 1 < skin.influence_offsets.size(); ++i) {
-    most = std::max(most, skin.influence_offsets[i + 1] - skin.influence_offsets[i]);
-  }
-  return static_cast<int>(std::min<uint32_t>(most, core::kMaxInfluencesPerVertex));
-}
-
 // A frame step of about frames / kProbeFrames, prime to 2 and 3 so that the probe sees
 // frames between stored ones at every stride up to 4.
 int ProbeStep(int frames) {
@@ -47,11 +40,6 @@ int ProbeStep(int frames) {
   while (step > 1 && (step % 2 == 0 || step % 3 == 0)) ++step;
   return step;
 }
-
-struct Candidate {
-  CostLevel level;
-  double probed_pct = 0;
-};
 
 }  // namespace
 
@@ -63,24 +51,39 @@ double LevelCost(const core::Character& character, double vertices, double mean_
   return (vertices * mean_influences + kJointCost * joints) / full;
 }
 
+CostLevel SkeletonLevel(const core::Character& character, const core::LevelResult& solved) {
+  CostLevel level;
+  level.skeleton = solved.skeleton;
+  level.stored_matrices = solved.matrices;
+  level.deviation.max_pct = solved.optimized.max_vertex_error_pct;
+  level.deviation.mean_pct = solved.optimized.mean_vertex_error_pct;
+  level.deviation.max_frame = solved.optimized.max_vertex_frame;
+  level.deviation.max_vertex = solved.optimized.max_vertex_index;
+  for (const core::LevelErrors& clip : solved.optimized.per_clip) {
+    core::LevelDeviation figures;
+    figures.max_pct = clip.max_vertex_error_pct;
+    figures.mean_pct = clip.mean_vertex_error_pct;
+    figures.max_frame = clip.max_vertex_frame;
+    figures.max_vertex = clip.max_vertex_index;
+    level.deviation.per_clip.push_back(figures);
+  }
+  const core::ReducedInfluences merged = core::ReduceInfluences(character.skin(), solved.skeleton);
+  level.mean_influences = static_cast<double>(merged.slots.size()) / character.vertex_count();
+  level.cost = LevelCost(character, character.vertex_count(), level.mean_influences,
+                         solved.skeleton.kept_count());
+  return level;
+}
+
 StatusOr<CostLevel> FullDetailLevel(const core::PreparedMotion& prepared) {
   const core::Character& character = prepared.character();
-  CostLevel level;
   std::unique_ptr<bool[]> every(new bool[character.joint_count()]);
   std::fill_n(every.get(), character.joint_count(), true);
   auto skeleton =
       core::ReduceSkeleton(character, std::span<const bool>(every.get(), character.joint_count()));
   if (!skeleton.ok()) return skeleton.status();
-  level.skeleton = *std::move(skeleton);
-  auto influences =
-      core::TruncateInfluences(character, level.skeleton, MostInfluences(character.skin()));
-  if (!influences.ok()) return influences.status();
-  level.influences = *std::move(influences);
-  auto solved = prepared.SolveLevel(level.skeleton);  // the full level is the original matrices
+  auto solved = prepared.SolveLevel(*skeleton);  // the full level is the original matrices
   if (!solved.ok()) return solved.status();
-  level.stored_matrices = std::move(solved->matrices);
-  level.cost = 1;
-  return level;
+  return SkeletonLevel(character, *solved);
 }
 
 Status CheapestLevelJob::Validate() const {
@@ -115,11 +118,18 @@ StatusOr<std::optional<CostLevel>> CheapestLevelJob::Run(TaskPool& pool) const {
   const int probe_step = ProbeStep(original.frame_count());
   const double budget_length = budget_pct / 100.0 * character.height();
 
-  auto deviation_of = [&](const CostLevel& level, int step) {
+  // A candidate's level and the influences it is measured with (its own, or the mesh's
+  // merged through the joint map where influences are not cut).
+  struct Candidate {
+    CostLevel level;
+    core::LevelInfluences measured_influences;
+  };
+  auto deviation_of = [&](const Candidate& candidate, int step) {
+    const CostLevel& level = candidate.level;
     const core::LevelDeviationJob job{prepared.get(),
                                       &level.skeleton,
                                       level.mesh ? &*level.mesh : nullptr,
-                                      &level.influences,
+                                      &candidate.measured_influences,
                                       level.stored_matrices,
                                       level.frame_stride,
                                       rigid,
@@ -129,8 +139,10 @@ StatusOr<std::optional<CostLevel>> CheapestLevelJob::Run(TaskPool& pool) const {
 
   // Every way of simplifying the mesh, then the original mesh (share 0).
   std::vector<std::pair<double, core::SkinSplit>> meshes;
-  for (core::SkinSplit split : {core::SkinSplit::kDominantJoint, core::SkinSplit::kWeightBands}) {
-    for (double share : kMeshShares) meshes.emplace_back(share, split);
+  if (parts.vertices) {
+    for (core::SkinSplit split : {core::SkinSplit::kDominantJoint, core::SkinSplit::kWeightBands}) {
+      for (double share : kMeshShares) meshes.emplace_back(share, split);
+    }
   }
   meshes.emplace_back(0.0, core::SkinSplit::kNone);
   std::vector<Candidate> candidates;
@@ -148,32 +160,30 @@ StatusOr<std::optional<CostLevel>> CheapestLevelJob::Run(TaskPool& pool) const {
       solve_on = *std::move(made);
       level.mesh = *std::move(mesh);
     }
-    // The fewest joints whose solved error on the level's vertices fits the skeleton's share.
+    // The fewest joints whose solved error on the level's vertices fits the skeleton's share
+    // (bisection on probe frames), solved on every frame.
     const double skeleton_pct = kSkeletonShare * (1 - share) * budget_pct;
-    std::optional<core::LevelResult> chosen;
     const int most = std::clamp(max_joints, fewest, n);
-    int lo = fewest, hi = most;
-    while (lo <= hi) {
-      const int mid = lo + (hi - lo) / 2;
-      auto skeleton = core::ReduceSkeletonToCount(solve_on->character(), *ranking, mid);
-      if (!skeleton.ok()) return skeleton.status();
-      auto solved = solve_on->SolveLevel(*skeleton);
-      if (!solved.ok()) return solved.status();
-      if (solved->optimized.max_vertex_error_pct <= skeleton_pct || mid == most) {
-        chosen = *std::move(solved);
-        hi = mid - 1;
-      } else {
-        lo = mid + 1;
-      }
-    }
+    auto count = core::SmallestLevelJob{solve_on.get(), ranking, parts.joints ? fewest : most, most,
+                                        skeleton_pct}
+                     .Run();
+    if (!count.ok()) return count.status();
+    auto skeleton = core::ReduceSkeletonToCount(solve_on->character(), *ranking, *count);
+    if (!skeleton.ok()) return skeleton.status();
+    auto chosen = solve_on->SolveLevel(*skeleton);
+    if (!chosen.ok()) return chosen.status();
     level.skeleton = chosen->skeleton;
-    for (int cap : caps) {
-      auto influences = core::InfluenceCapJob{solve_on.get(), &level.skeleton, chosen->matrices,
-                                              cap, normal_weight}
-                            .Run();
+    // Cap 0: the mesh's influences merged through the joint map (none of the level's own).
+    const std::vector<int> tried_caps = parts.influences ? caps : std::vector<int>{0};
+    for (int cap : tried_caps) {
+      auto influences = cap == 0 ? core::TruncateInfluences(solve_on->character(), level.skeleton,
+                                                            core::kMaxInfluencesPerVertex)
+                                 : core::InfluenceCapJob{solve_on.get(), &level.skeleton,
+                                                         chosen->matrices, cap, normal_weight}
+                                       .Run();
       if (!influences.ok()) return influences.status();
       std::vector<core::RowMajorAffine34f> matrices = chosen->matrices;
-      if (!rigid) {  // affine levels: a matrix step, then the weights again
+      if (!rigid && cap > 0) {  // affine levels: a matrix step, then the weights again
         auto stepped =
             core::InfluenceMatrixJob{solve_on.get(), &level.skeleton, matrices,
                                      &*influences,   normal_weight,   settings.regularization}
@@ -185,25 +195,26 @@ StatusOr<std::optional<CostLevel>> CheapestLevelJob::Run(TaskPool& pool) const {
                 .Run();
         if (!influences.ok()) return influences.status();
       }
-      level.influences = *std::move(influences);
+      Candidate candidate{level, *std::move(influences)};
+      if (cap > 0) candidate.level.influences = candidate.measured_influences;
+      candidate.level.mean_influences = candidate.measured_influences.mean_used();
       bool fits = false;
       Candidate best;
-      for (int stride = 1; stride <= max_frame_stride; ++stride) {
+      for (int stride = 1; stride <= (parts.pose_rate ? max_frame_stride : 1); ++stride) {
         auto stored =
             core::StoreAtStride(matrices, level.skeleton.kept_count(), original.clips(), stride);
         if (!stored.ok()) return stored.status();
-        level.frame_stride = stride;
-        level.stored_matrices = *std::move(stored);
-        auto probed = deviation_of(level, probe_step);
+        candidate.level.frame_stride = stride;
+        candidate.level.stored_matrices = *std::move(stored);
+        auto probed = deviation_of(candidate, probe_step);
         if (!probed.ok()) return probed.status();
         if (probed->max_pct > kProbeMargin * budget_pct) break;
         fits = true;
-        best = {level, probed->max_pct};
+        best = candidate;
       }
       if (fits) {
-        best.level.cost =
-            LevelCost(character, best.level.vertex_count(character),
-                      best.level.influences.mean_used(), best.level.skeleton.kept_count());
+        best.level.cost = LevelCost(character, best.level.vertex_count(character),
+                                    best.level.mean_influences, best.level.skeleton.kept_count());
         candidates.push_back(std::move(best));
         break;  // a larger cap costs more at the same vertices and joints
       }
@@ -212,7 +223,7 @@ StatusOr<std::optional<CostLevel>> CheapestLevelJob::Run(TaskPool& pool) const {
   std::sort(candidates.begin(), candidates.end(),
             [](const Candidate& a, const Candidate& b) { return a.level.cost < b.level.cost; });
   for (Candidate& candidate : candidates) {
-    auto measured = deviation_of(candidate.level, 1);
+    auto measured = deviation_of(candidate, 1);
     if (!measured.ok()) return measured.status();
     if (measured->max_pct <= budget_pct && candidate.level.cost < 1) {
       candidate.level.deviation = *std::move(measured);
@@ -228,7 +239,11 @@ Status CostLadderJob::Validate() const {
     return InvalidArgument("CostLadderJob: the pixel heights must be positive and decreasing");
   }
   if (!(budget_px > 0)) return InvalidArgument("CostLadderJob: the budget must be positive");
-  return CheapestLevelJob{prepared, motion, ranking, simd}.Validate();
+  CheapestLevelJob job;
+  job.prepared = prepared;
+  job.motion = motion;
+  job.ranking = ranking;
+  return job.Validate();
 }
 
 StatusOr<std::vector<CostLevel>> CostLadderJob::Run(TaskPool& pool) const {
@@ -238,7 +253,12 @@ StatusOr<std::vector<CostLevel>> CostLadderJob::Run(TaskPool& pool) const {
   if (!full.ok()) return full.status();
   ladder.push_back(*std::move(full));
   for (double height : heights_px) {
-    CheapestLevelJob job{prepared, motion, ranking, simd};
+    CheapestLevelJob job;
+    job.prepared = prepared;
+    job.motion = motion;
+    job.ranking = ranking;
+    job.simd = simd;
+    job.parts = parts;
     job.budget_pct = 100.0 * budget_px / height;
     job.max_joints = ladder.back().skeleton.kept_count();
     auto found = job.Run(pool);

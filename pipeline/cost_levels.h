@@ -34,10 +34,12 @@ inline constexpr double kJointCost = 24.0;
 struct CostLevel {
   core::ReducedSkeleton skeleton;
   std::optional<core::LevelMesh> mesh;  // empty: every vertex and triangle of the character
-  core::LevelInfluences influences;     // per level vertex
+  // Per level vertex; empty (per_vertex 0): the mesh's own, merged through the joint map.
+  core::LevelInfluences influences;
   int frame_stride = 1;
   // The stored frames of every clip (core::StoreAtStride) x m.
   std::vector<core::RowMajorAffine34f> stored_matrices;
+  double mean_influences = 0;      // used per level vertex, on average
   core::LevelDeviation deviation;  // on every frame and original vertex
   double cost = 1;                 // the model above, full detail = 1
 
@@ -54,9 +56,23 @@ struct CostLevel {
 double LevelCost(const core::Character& character, double vertices, double mean_influences,
                  int joints);
 
-// Full detail as a CostLevel: every joint, vertex and influence (up to the character's most
-// per vertex), every frame, the original matrices; deviation 0.
+// A level of the skeleton's solve alone (`--levels`): the whole mesh, the mesh's
+// influences merged through the joint map (no influences of its own: LevelInfluences
+// empty), every frame, the solved matrices; its deviation the solve's exact figures.
+CostLevel SkeletonLevel(const core::Character& character, const core::LevelResult& solved);
+
+// Full detail as a CostLevel: every joint, vertex and influence, every frame, the original
+// matrices; deviation 0, cost 1.
 StatusOr<CostLevel> FullDetailLevel(const core::PreparedMotion& prepared);
+
+// What levels may cut; all of it by default, one part switched off to measure its share of
+// the saving.
+struct CostLevelParts {
+  bool joints = true;      // else every joint up to the finer level's
+  bool vertices = true;    // else the whole mesh
+  bool influences = true;  // else the mesh's own, merged through the joint map
+  bool pose_rate = true;   // else every frame
+};
 
 struct CheapestLevelJob {
   // The original character and every clip, in the bake's variant.
@@ -65,6 +81,7 @@ struct CheapestLevelJob {
   const core::JointRanking* ranking = nullptr;
   core::SimdChoice simd = core::SimdChoice::kWidest;
   double budget_pct = 1;  // the honest maximum error allowed, percent of the height
+  CostLevelParts parts;
   std::vector<int> caps = {1, 2, 4};
   int max_frame_stride = 4;
   // At most this many joints (a coarser level of a ladder keeps a subset of the finer one's).
@@ -88,6 +105,7 @@ struct CostLadderJob {
   core::SimdChoice simd = core::SimdChoice::kWidest;
   std::vector<double> heights_px = {800, 400, 200, 100, 50, 25, 12};  // decreasing
   double budget_px = 1;
+  CostLevelParts parts;
 
   Status Validate() const;
   StatusOr<std::vector<CostLevel>> Run(TaskPool& pool) const;

@@ -1,6 +1,10 @@
 #include "pipeline/export.h"
 
+#include <algorithm>
+#include <vector>
+
 #include "core/character.h"
+#include "core/pose_rate.h"
 #include "proto/aligned_bytes.h"
 #include "proto/level_format.h"
 
@@ -34,13 +38,25 @@ StatusOr<io::GltfExport> ExportLevelGltf(const io::Asset& character, std::string
   const proto::ClipView& chosen_clip = clips[clip];
   auto built = core::BuildCharacter(character.character());
   if (!built.ok()) return built.status();
-  const size_t frame_floats = size_t{chosen->kept_count()} * proto::kMatrixFloats;
+  // Every frame of the clip: the stored poses, and between them the interpolation a player
+  // makes at the level's pose rate (core/pose_rate.h).
+  const uint32_t m = chosen->kept_count();
+  std::vector<float> matrices(size_t{chosen_clip.frame_count} * m * proto::kMatrixFloats);
+  for (uint32_t t = 0; t < chosen_clip.frame_count; ++t) {
+    const proto::FrameBlend blend = chosen->Blend(static_cast<uint32_t>(clip), t, chosen_clip.frame_count);
+    for (uint32_t s = 0; s < m; ++s) {
+      const core::RowMajorAffine34f from = Eigen::Map<const core::RowMajorAffine34f>(chosen->matrix(blend.from, s));
+      const core::RowMajorAffine34f to = Eigen::Map<const core::RowMajorAffine34f>(chosen->matrix(blend.to, s));
+      const core::RowMajorAffine34f played = core::InterpolateMatrix(from, to, blend.fraction, view->rigid());
+      std::copy(played.data(), played.data() + proto::kMatrixFloats,
+                matrices.begin() + (size_t{t} * m + s) * proto::kMatrixFloats);
+    }
+  }
   const io::GltfLevel level{
       .joint_names = view->joint_names(),
       .kept_joints = chosen->kept_joints(),
       .joint_map = chosen->joint_map(),
-      .matrices = chosen->matrices().subspan(chosen_clip.first_frame * frame_floats,
-                                             chosen_clip.frame_count * frame_floats),
+      .matrices = matrices,
       .frame_count = chosen_clip.frame_count,
       .fps = chosen_clip.fps,
       .rigid = view->rigid(),

@@ -14,6 +14,7 @@
 #include "core/rank_joints.h"
 #include "core/solve_levels.h"
 #include "pipeline/bake.h"
+#include "pipeline/cost_levels.h"
 #include "proto/level_format.h"
 
 namespace motionlod::pipeline {
@@ -31,6 +32,13 @@ struct VariantCurve {
   std::vector<CurvePoint> points;  // every level, finest first
 };
 
+// One level as a bake writes it: what the file holds, and its skeleton's solve on the whole
+// mesh (the E and baseline figures of the report).
+struct BakedLevel {
+  CostLevel level;
+  const core::LevelResult* skeleton = nullptr;
+};
+
 struct ReportInputs {
   const BakeRequest& request;
   const core::Character& character;
@@ -38,8 +46,7 @@ struct ReportInputs {
   const core::JointRanking& ranking;        // the one the levels follow (request.ranking_method)
   const core::JointRanking& paper_ranking;  // the paper's, for the table beside it
   const core::PreparedMotion& prepared;
-  const std::vector<int>& counts;  // finest first
-  const std::map<int, core::LevelResult>& levels;
+  const std::vector<BakedLevel>& levels;  // finest first
   const std::vector<VariantCurve>& curves;
   double bake_seconds = 0;
   double skinning_pass_seconds = 0;
@@ -47,18 +54,17 @@ struct ReportInputs {
   std::vector<std::string> warnings;
 };
 
-// The level file of the solved `levels` listed in `counts` (finest first): header and
-// skeleton from the character, motion and settings, each level's kept joints, joint map,
-// optimised figures and matrices. The matrices are the results' own row-major 3x4s, read
-// in place: encoding copies them once, straight into the file. `run`: where the encoding's
-// checks run (proto::EncodeLevelSet).
-StatusOr<std::string> EncodeSolvedLevels(const core::Character& character,
-                                         const core::Motion& motion,
-                                         const core::SolveSettings& settings,
-                                         const std::array<uint8_t, 32>& source_hash,
-                                         const std::vector<int>& counts,
-                                         const std::map<int, core::LevelResult>& levels,
-                                         const PieceRunner& run);
+// The level file of `levels` (finest first): header and skeleton from the character, motion
+// and settings, each level's kept joints, joint map, figures (its deviation), pose rate,
+// own mesh and influences where it has them, cost and stored matrices, read in place:
+// encoding copies them once, straight into the file. `run`: where the encoding's checks
+// run (proto::EncodeLevelSet).
+StatusOr<std::string> EncodeBakedLevels(const core::Character& character,
+                                        const core::Motion& motion,
+                                        const core::SolveSettings& settings,
+                                        const std::array<uint8_t, 32>& source_hash,
+                                        const std::vector<BakedLevel>& levels,
+                                        const PieceRunner& run);
 
 nlohmann::json BuildReport(const ReportInputs& inputs);
 

@@ -24,8 +24,9 @@ void ReadOptional(const json& j, const char* key, T& out) {
   if (const auto it = j.find(key); it != j.end() && !it->is_null()) it->get_to(out);
 }
 
-void ReadOptional(const json& j, const char* key, std::optional<double>& out) {
-  if (const auto it = j.find(key); it != j.end() && !it->is_null()) out = it->get<double>();
+template <typename T>
+void ReadOptional(const json& j, const char* key, std::optional<T>& out) {
+  if (const auto it = j.find(key); it != j.end() && !it->is_null()) out = it->get<T>();
 }
 
 }  // namespace
@@ -236,6 +237,14 @@ void to_json(json& j, const JobStatus& v) {
 void to_json(json& j, const LevelEntry& v) {
   j = json{{"index", v.index},
            {"joints", v.joints},
+           {"vertices", v.vertices},
+           {"triangles", v.triangles},
+           {"influences_per_vertex",
+            v.influences_per_vertex ? json(*v.influences_per_vertex) : json(nullptr)},
+           {"mean_influences", v.mean_influences},
+           {"frame_stride", v.frame_stride},
+           {"stream_bytes_per_second", v.stream_bytes_per_second},
+           {"cost", v.cost},
            {"max_vertex_error_pct", v.max_vertex_error_pct},
            {"mean_vertex_error_pct", v.mean_vertex_error_pct},
            {"mean_normal_error_deg", v.mean_normal_error_deg},
@@ -350,7 +359,8 @@ void from_json(const json& j, JobStatus& v) {
   ReadOptional(j, "progress", v.progress);
   ReadOptional(j, "stage", v.stage);
   if (const auto error = j.find("error"); error != j.end() && !error->is_null()) {
-    v.error = JobError{error->at("code").get<std::string>(), error->at("detail").get<std::string>()};
+    v.error =
+        JobError{error->at("code").get<std::string>(), error->at("detail").get<std::string>()};
   }
   ReadOptional(j, "attempts", v.attempts);
   ReadOptional(j, "version", v.version);
@@ -362,6 +372,13 @@ void from_json(const json& j, JobStatus& v) {
 void from_json(const json& j, LevelEntry& v) {
   j.at("index").get_to(v.index);
   j.at("joints").get_to(v.joints);
+  ReadOptional(j, "vertices", v.vertices);
+  ReadOptional(j, "triangles", v.triangles);
+  ReadOptional(j, "influences_per_vertex", v.influences_per_vertex);
+  ReadOptional(j, "mean_influences", v.mean_influences);
+  ReadOptional(j, "frame_stride", v.frame_stride);
+  ReadOptional(j, "stream_bytes_per_second", v.stream_bytes_per_second);
+  ReadOptional(j, "cost", v.cost);
   j.at("max_vertex_error_pct").get_to(v.max_vertex_error_pct);
   ReadOptional(j, "mean_vertex_error_pct", v.mean_vertex_error_pct);
   ReadOptional(j, "mean_normal_error_deg", v.mean_normal_error_deg);

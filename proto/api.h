@@ -76,8 +76,8 @@ struct BakeRequest {
   // resolved by the daemon: the motion ids, `motion` empty.
   std::vector<std::string> clips;
   std::string ranking = "greedy";  // the joint ranking: greedy or paper
-  std::vector<int> levels;  // kept joint counts; empty: the default ladder
-  bool all_levels = false;  // every count from all joints down to the locked minimum
+  std::vector<int> levels;         // kept joint counts; empty: the default ladder
+  bool all_levels = false;         // every count from all joints down to the locked minimum
   std::string variant = "vpno+pd";
   double fps = 0;  // 0: the source's rate; else (0, 1000]
   std::vector<std::string> locked_joints;
@@ -113,6 +113,18 @@ struct JobStatus {
 struct LevelEntry {
   int index = 0;
   int joints = 0;
+  // What the level draws and streams (report.json's level of the same index): its vertices
+  // and triangles (the character's own where it has no mesh of its own), its own
+  // influences per vertex (nullopt: the mesh's, merged through the joint map) and how many
+  // it uses on average, its frame stride (poses stored: every stride-th frame), the matrix
+  // stream's bytes per second and the modelled cost of a frame against full detail.
+  int vertices = 0;
+  int triangles = 0;
+  std::optional<int> influences_per_vertex;
+  double mean_influences = 0;
+  int frame_stride = 1;
+  double stream_bytes_per_second = 0;
+  double cost = 0;
   double max_vertex_error_pct = 0;
   double mean_vertex_error_pct = 0;
   double mean_normal_error_deg = 0;

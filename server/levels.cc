@@ -67,6 +67,16 @@ StatusOr<std::shared_ptr<const Levels::Table>> Levels::GetTable(const BakeRecord
     api::LevelEntry entry;
     entry.index = static_cast<int>(l);
     entry.joints = (*levels)[l].joints;
+    entry.vertices = level.value("vertices", 0);
+    entry.triangles = level.value("triangles", 0);
+    if (const auto k = level.find("influences_per_vertex");
+        k != level.end() && k->is_number_integer()) {
+      entry.influences_per_vertex = k->get<int>();
+    }
+    entry.mean_influences = level.value("mean_influences", 0.0);
+    entry.frame_stride = level.value("frame_stride", 1);
+    entry.stream_bytes_per_second = level.value("stream_bytes_per_second", 0.0);
+    entry.cost = level.value("cost", 0.0);
     entry.max_vertex_error_pct = pct;
     entry.mean_vertex_error_pct = level.value("mean_vertex_error_pct", 0.0);
     entry.mean_normal_error_deg = level.value("mean_normal_error_deg", 0.0);

@@ -200,15 +200,19 @@ void PrintLevelTable(const nlohmann::json& report) {
               report["character"]["joints"].get<int>(), report["character"]["vertices"].get<int>(),
               report["motion"]["name"].get<std::string>().c_str(), report["motion"]["frames"].get<int>(),
               report["motion"]["fps"].get<double>(), report["variant"].get<std::string>().c_str());
-  std::printf("%6s %10s %10s %9s %9s %9s %9s %12s\n", "joints", "mean_E", "base_E", "max_err%",
-              "base_max%", "mean_err%", "normal°", "max_px@1px");
+  std::printf("%6s %6s %6s %5s %3s %6s %10s %10s %9s %9s %9s %9s %12s\n", "joints", "verts", "tris",
+              "infl", "r", "cost", "mean_E", "base_E", "max_err%", "base_max%", "mean_err%", "normal°",
+              "max_px@1px");
   for (const auto& level : report["levels"]) {
     const nlohmann::json& limit = level["max_px_for_1px_error"];
     const std::string px = limit.is_null() || limit.get<double>() >= 1e6
                                ? "any"
                                : std::to_string(static_cast<long>(limit.get<double>()));
-    std::printf("%6d %10.3g %10.3g %9.3f %9.3f %9.3f %9.2f %12s\n", level["joints"].get<int>(),
-                level["mean_E"].get<double>(), level["baseline_mean_E"].get<double>(),
+    std::printf("%6d %6d %6d %5.2f %3d %6.3f %10.3g %10.3g %9.3f %9.3f %9.3f %9.2f %12s\n",
+                level["joints"].get<int>(), level["vertices"].get<int>(), level["triangles"].get<int>(),
+                level["mean_influences"].get<double>(), level["frame_stride"].get<int>(),
+                level["cost"].get<double>(), level["mean_E"].get<double>(),
+                level["baseline_mean_E"].get<double>(),
                 level["max_vertex_error_pct"].get<double>(),
                 level["baseline_max_vertex_error_pct"].get<double>(),
                 level["mean_vertex_error_pct"].get<double>(), level["mean_normal_error_deg"].get<double>(),

@@ -3,34 +3,39 @@
 // wedge from 2 m to 100 m (fig. 9's layout: many far, few near). Each frame every
 // character gets its on-screen height from the camera (proto/level_selection.h, fig. 5),
 // picks its level with the client's LevelSelector (1 px budget, 10% hysteresis) and is
-// skinned on the CPU by the client's skinner (client/skinner.h); beside it the same crowd
-// with every character at full detail (level 0 of the default ladder: every joint, the
-// original skinning matrices), and with every character at its coarsest level (a bound:
-// what fewer joints can save on this path at any error). The characters are the skinned, animated files of
-// ../shared/data, baked in-process with pipeline::Bake (default ladder, vpno+pd).
+// drawn by the client: PlayFrame (the level's matrices, interpolated where it stores fewer
+// poses) and SkinFrameJob over the level's own vertices and influences (client/skinner.h).
+// Beside it the same crowd at full detail (level 0: every joint, vertex and influence,
+// every frame). The characters are the skinned, animated files of ../shared/data, baked
+// in-process with pipeline::Bake (the default ladder, levels by cost, vpno+pd), and again
+// with each part of a level's saving switched off (joints, vertices, influences, pose rate:
+// BakeRequest::level_parts) to give each part's share.
 //
 // Per character and frame, timed separately in the worker's CPU time
 // (CLOCK_THREAD_CPUTIME_ID: time the thread ran, so other processes on a shared machine
 // do not inflate it; the frame's wall time is reported beside it):
-//   matrix update  level choice, then the frame's m matrices of that level copied into
-//                  the frame's matrix stream (what a GPU renderer uploads: 48 m bytes)
-//   skinning       SkinFrameJob: positions and normals from the stream into a scratch
-//                  buffer of the worker (cache-resident)
+//   matrix update  level choice, then PlayFrame into the frame's matrix stream (what a GPU
+//                  renderer uploads: 48 m bytes)
+//   skinning       SkinFrameJob: positions and normals of the level's vertices into a
+//                  scratch buffer of the worker (cache-resident)
 //   output         the scratch copied into the crowd's vertex buffer (24 bytes per
 //                  vertex: what a renderer hands to the GPU)
-// Quality (a separate, untimed pass on every 10th frame): each character skinned at its
-// level and at full detail; the vertex error in pixels is |p_level - p_full| scaled by
-// the character's on-screen height over its model height (the units of the bake's level
-// table), mean and max over every vertex of every character.
+// Quality (a separate, untimed pass on every 10th frame): each character drawn at its
+// level and at full detail; the error in pixels of every original vertex is its distance
+// to the point of the level's surface that stands for it (the vertex itself, or a point of
+// a simplified triangle: core::SurfaceCorrespondence), scaled by the character's on-screen
+// height over its model height (the units of the level table); mean and max over every
+// vertex of every character.
 //
-// The three crowds run alternately, --repetitions times per thread count; the
-// tables give the median of each figure.
+// The crowds run alternately, --repetitions times per thread count; the tables give the
+// median of each figure.
 //
 //   crowd [--characters=1000] [--frames=120] [--threads=1,2] [--repetitions=3] [--data=DIR]
-//         [--budget=1] [--hysteresis=0.1] [--json=FILE]
+//         [--budget=1] [--hysteresis=0.1] [--parts=1] [--json=FILE]
 #include <time.h>
 
 #include <algorithm>
+#include <array>
 #include <barrier>
 #include <chrono>
 #include <cmath>
@@ -50,6 +55,7 @@
 
 #include "client/level_selector.h"
 #include "client/skinner.h"
+#include "core/simplify_mesh.h"
 #include "io/asset.h"
 #include "pipeline/bake.h"
 #include "proto/level_format.h"
@@ -67,9 +73,9 @@ using Clock = std::chrono::steady_clock;
 
 constexpr double kFovY = std::numbers::pi / 3;  // 60 degrees
 constexpr double kScreenHeightPx = 1080;
-constexpr double kCharacterSizeM = 1.8;          // every character drawn 1.8 m tall
+constexpr double kCharacterSizeM = 1.8;  // every character drawn 1.8 m tall
 constexpr double kNearM = 2, kFarM = 100;
-constexpr int kQualityEvery = 10;                // frames between quality samples
+constexpr int kQualityEvery = 10;  // frames between quality samples
 
 struct Options {
   int characters = 1000;
@@ -79,34 +85,69 @@ struct Options {
   fs::path data = MOTIONLOD_BENCH_DATA;
   double budget_px = 1.0;
   double hysteresis = 0.1;
+  bool parts = true;  // also the ladders with each part switched off
   std::string json_path;
 };
 
-// One kind of character: its mesh, its baked levels and the per-level merged skins.
+// One bake of a kind of character: its levels as the client draws them.
+struct Ladder {
+  std::string name;  // which parts its levels cut
+  proto::AlignedBytes level_set_bytes;
+  proto::LevelSetView level_set;
+  std::vector<LevelSkin> skins;  // per level
+  // Per level: each original vertex's point on the level's surface (empty where the level
+  // draws every vertex).
+  std::vector<std::vector<core::SurfacePoint>> correspondence;
+  std::optional<LevelSelector> selector;
+};
+
+// One kind of character: its mesh and its ladders (the first cuts every part).
 struct CharacterType {
   std::string label;
   std::shared_ptr<const core::Character> character;
-  proto::AlignedBytes level_set_bytes;
-  proto::LevelSetView level_set;
   SkinMesh mesh;
-  std::vector<LevelSkin> skins;  // per level
-  std::optional<LevelSelector> selector;
-  double height = 0;             // model units
+  std::vector<Ladder> ladders;
+  double height = 0;  // model units
+};
+
+// The ladders baked per character: every part, then each part switched off.
+struct LadderKind {
+  const char* name;
+  pipeline::CostLevelParts parts;
+};
+constexpr LadderKind kLadderKinds[] = {
+    {"every part", {}},
+    {"no joint cut", {.joints = false}},
+    {"no vertex cut", {.vertices = false}},
+    {"no influence cut", {.influences = false}},
+    {"no pose-rate cut", {.pose_rate = false}},
 };
 
 struct Instance {
   int type = 0;
   double distance_m = 0;
-  int phase = 0;        // frame offset into the motion
-  int level = -1;       // current level (hysteresis state)
+  int phase = 0;             // frame offset into the motion
+  int level = -1;            // current level (hysteresis state)
   size_t vertex_offset = 0;  // into the crowd's vertex buffer, in vertices
 };
+
+// Frame `frame` of a character whose motion starts at `phase`: the clip and the frame
+// within it, over every clip of the set one after another.
+std::pair<uint32_t, uint32_t> ClipFrame(const proto::LevelSetView& set, int frame, int phase) {
+  const uint32_t g = static_cast<uint32_t>(frame + phase) % set.frame_count();
+  for (uint32_t c = 0; c < set.clip_count(); ++c) {
+    const proto::ClipView& clip = set.clip(c);
+    if (g < clip.first_frame + clip.frame_count) return {c, g - clip.first_frame};
+  }
+  return {0, 0};
+}
 
 bool ParseOptions(int argc, char** argv, Options& o) {
   for (int a = 1; a < argc; ++a) {
     const std::string arg = argv[a];
     const size_t eq = arg.find('=');
-    const std::string name = arg.substr(0, eq), value = eq == std::string::npos ? "" : arg.substr(eq + 1);
+    const std::string name = arg.substr(0, eq),
+                      value = eq == std::string::npos ? "" : arg.substr(eq + 1);
     if (name == "--characters") {
       o.characters = std::stoi(value);
     } else if (name == "--frames") {
@@ -123,6 +164,8 @@ bool ParseOptions(int argc, char** argv, Options& o) {
       o.budget_px = std::stod(value);
     } else if (name == "--hysteresis") {
       o.hysteresis = std::stod(value);
+    } else if (name == "--parts") {
+      o.parts = value != "0";
     } else if (name == "--json") {
       o.json_path = value;
     } else {
@@ -130,8 +173,8 @@ bool ParseOptions(int argc, char** argv, Options& o) {
       return false;
     }
   }
-  const bool threads_ok = !o.threads.empty() &&
-                          std::all_of(o.threads.begin(), o.threads.end(), [](int t) { return t >= 1; });
+  const bool threads_ok = !o.threads.empty() && std::all_of(o.threads.begin(), o.threads.end(),
+                                                            [](int t) { return t >= 1; });
   if (o.characters < 1 || o.frames < 1 || o.repetitions < 1 || !threads_ok || !(o.budget_px > 0)) {
     std::fprintf(stderr,
                  "crowd: --characters, --frames, --threads, --repetitions and --budget must be "
@@ -151,21 +194,17 @@ std::optional<CharacterType> LoadType(const fs::path& path, const Options& o) {
   pipeline::BakeRequest request;
   request.character = *asset;
   request.threads = 2;
+  request.measure_skinning_pass = false;
   auto inputs = pipeline::PrepareInputs(request);
-  auto output = pipeline::Bake(request);
-  if (!inputs.ok() || !output.ok()) {
+  if (!inputs.ok()) {
     std::fprintf(stderr, "crowd: skipping %s: %s\n", path.filename().c_str(),
-                 (!inputs.ok() ? inputs.status() : output.status()).ToString().c_str());
+                 inputs.status().ToString().c_str());
     return std::nullopt;
   }
   CharacterType type;
   type.label = path.filename().string();
   type.character = inputs->character;
   type.height = type.character->height();
-  type.level_set_bytes = proto::AlignedBytes::CopyOf(output->level_set);
-  auto view = proto::DecodeLevelSet(type.level_set_bytes.bytes());
-  if (!view.ok()) return std::nullopt;
-  type.level_set = std::move(*view);
   const core::RawSkin& skin = type.character->skin();
   const size_t p = skin.positions.size();
   type.mesh = SkinMesh{{skin.positions.data()->data(), 3 * p},
@@ -173,16 +212,40 @@ std::optional<CharacterType> LoadType(const fs::path& path, const Options& o) {
                        skin.influence_offsets,
                        skin.influence_joints,
                        skin.influence_weights};
-  std::vector<double> errors;
-  for (const proto::LevelView& level : type.level_set.levels()) {
-    auto built = LevelSkin::Build(type.mesh, level.joint_map(), level.kept_count());
-    if (!built.ok()) return std::nullopt;
-    type.skins.push_back(std::move(*built));
-    errors.push_back(level.figures().max_vertex_error_pct);
+  for (const LadderKind& kind : kLadderKinds) {
+    if (!o.parts && &kind != &kLadderKinds[0]) break;
+    request.level_parts = kind.parts;
+    auto output = pipeline::Bake(request);
+    if (!output.ok()) {
+      std::fprintf(stderr, "crowd: skipping %s: %s\n", path.filename().c_str(),
+                   output.status().ToString().c_str());
+      return std::nullopt;
+    }
+    Ladder ladder;
+    ladder.name = kind.name;
+    ladder.level_set_bytes = proto::AlignedBytes::CopyOf(output->level_set);
+    auto view = proto::DecodeLevelSet(ladder.level_set_bytes.bytes());
+    if (!view.ok()) return std::nullopt;
+    ladder.level_set = std::move(*view);
+    std::vector<double> errors;
+    for (const proto::LevelView& level : ladder.level_set.levels()) {
+      auto built = LevelSkin::Build(type.mesh, level);
+      if (!built.ok()) return std::nullopt;
+      ladder.skins.push_back(std::move(*built));
+      std::vector<core::SurfacePoint> points;
+      if (level.has_own_mesh()) {
+        std::vector<std::array<uint32_t, 3>> triangles(level.triangles().size() / 3);
+        std::memcpy(triangles.data(), level.triangles().data(), level.triangles().size_bytes());
+        points = core::SurfaceCorrespondence(*type.character, level.vertices(), triangles, 0);
+      }
+      ladder.correspondence.push_back(std::move(points));
+      errors.push_back(level.figures().max_vertex_error_pct);
+    }
+    auto selector = LevelSelector::Create(errors, {o.budget_px, o.hysteresis});
+    if (!selector.ok()) return std::nullopt;
+    ladder.selector = std::move(*selector);
+    type.ladders.push_back(std::move(ladder));
   }
-  auto selector = LevelSelector::Create(errors, {o.budget_px, o.hysteresis});
-  if (!selector.ok()) return std::nullopt;
-  type.selector = std::move(*selector);
   return type;
 }
 
@@ -203,37 +266,22 @@ struct Phases {  // CPU seconds
   uint64_t matrix_bytes = 0;
 };
 
-// How each character's level is picked: always the finest (every joint), by pixel size
-// (the method), or always the coarsest of the ladder (the ceiling of what fewer joints
-// can save here, whatever it costs in error).
-enum class Mode { kFullDetail, kMotionLod, kCoarsest };
-const char* ModeName(Mode mode) {
-  switch (mode) {
-    case Mode::kFullDetail:
-      return "full detail";
-    case Mode::kMotionLod:
-      return "Motion LoD";
-    case Mode::kCoarsest:
-      return "coarsest level (bound)";
-  }
-  return "";
-}
-
 struct RunResult {
   int threads = 0;
-  Mode mode = Mode::kFullDetail;
+  int ladder = -1;          // the ladder drawn, -1: full detail
   double ms_per_frame = 0;  // wall, per frame
   Phases per_frame;         // CPU, summed over threads, per frame
 };
 
 // Runs the crowd for o.frames frames on `threads` workers (contiguous slices of the
-// crowd, a barrier at every frame's end).
+// crowd, a barrier at every frame's end): every character at full detail (ladder -1) or at
+// its level of `ladder`.
 RunResult RunCrowd(const std::vector<CharacterType>& types, std::vector<Instance> crowd,
-                   std::vector<float>& vertex_buffer, Mode mode, int threads, const Options& o) {
+                   std::vector<float>& vertex_buffer, int ladder, int threads, const Options& o) {
   size_t max_vertices = 0, max_kept = 0;
   for (const CharacterType& type : types) {
     max_vertices = std::max<size_t>(max_vertices, type.mesh.positions.size() / 3);
-    max_kept = std::max<size_t>(max_kept, type.level_set.joint_count());
+    max_kept = std::max<size_t>(max_kept, type.ladders.front().level_set.joint_count());
   }
   // The frame's matrix stream: a slot of the largest palette per character.
   std::vector<float> stream(crowd.size() * max_kept * proto::kMatrixFloats);
@@ -246,30 +294,34 @@ RunResult RunCrowd(const std::vector<CharacterType>& types, std::vector<Instance
     frame_start = now;
   });
   auto work = [&](int worker) {
-    const size_t begin = crowd.size() * worker / threads, end = crowd.size() * (worker + 1) / threads;
+    const size_t begin = crowd.size() * worker / threads,
+                 end = crowd.size() * (worker + 1) / threads;
     std::vector<float> scratch_positions(3 * max_vertices), scratch_normals(3 * max_vertices);
     Phases& mine = phases[static_cast<size_t>(worker)];
     for (int frame = 0; frame < o.frames; ++frame) {
       for (size_t c = begin; c < end; ++c) {
         Instance& instance = crowd[c];
         const CharacterType& type = types[static_cast<size_t>(instance.type)];
+        const Ladder& drawn = type.ladders[static_cast<size_t>(std::max(ladder, 0))];
         const double t0 = ThreadCpuSeconds();
         const int level =
-            mode == Mode::kMotionLod ? type.selector->Choose(PixelHeightAt(instance.distance_m), instance.level)
-            : mode == Mode::kCoarsest ? static_cast<int>(type.level_set.level_count()) - 1
-                                      : 0;
+            ladder >= 0 ? drawn.selector->Choose(PixelHeightAt(instance.distance_m), instance.level)
+                        : 0;
         instance.level = level;
-        const proto::LevelView& view = type.level_set.level(static_cast<uint32_t>(level));
-        const uint32_t t = static_cast<uint32_t>(frame + instance.phase) % view.frame_count();
-        const std::span<const float> matrices = view.frame(t);
-        float* slot = stream.data() + c * max_kept * proto::kMatrixFloats;
-        std::memcpy(slot, matrices.data(), matrices.size_bytes());
-        mine.matrix_bytes += matrices.size_bytes();
+        const proto::LevelView& view = drawn.level_set.level(static_cast<uint32_t>(level));
+        const auto [clip, t] = ClipFrame(drawn.level_set, frame, instance.phase);
+        const std::span<float> slot(stream.data() + c * max_kept * proto::kMatrixFloats,
+                                    view.kept_count() * proto::kMatrixFloats);
+        if (!client::PlayFrame(drawn.level_set, view, clip, t, slot).ok()) std::abort();  // a bug
+        mine.matrix_bytes += slot.size_bytes();
         const double t1 = ThreadCpuSeconds();
-        const LevelSkin& skin = type.skins[static_cast<size_t>(level)];
+        const LevelSkin& skin = drawn.skins[static_cast<size_t>(level)];
         const size_t floats = 3 * size_t{skin.vertex_count()};
-        const SkinFrameJob job{&skin, {slot, matrices.size()}, type.level_set.rigid(),
-                               {scratch_positions.data(), floats}, {scratch_normals.data(), floats}};
+        const SkinFrameJob job{&skin,
+                               slot,
+                               drawn.level_set.rigid(),
+                               {scratch_positions.data(), floats},
+                               {scratch_normals.data(), floats}};
         if (!job.Run().ok()) std::abort();  // shapes are fixed at set-up: a bug
         const double t2 = ThreadCpuSeconds();
         float* out = vertex_buffer.data() + instance.vertex_offset * 6;
@@ -291,7 +343,7 @@ RunResult RunCrowd(const std::vector<CharacterType>& types, std::vector<Instance
 
   RunResult result;
   result.threads = threads;
-  result.mode = mode;
+  result.ladder = ladder;
   // The first frame warms caches and the allocator: left out of the mean.
   const size_t skip = frame_seconds.size() > 1 ? 1 : 0;
   double total = 0;
@@ -324,18 +376,21 @@ RunResult Median(std::vector<RunResult> runs) {
 
 struct Quality {
   double mean_error_px = 0, max_error_px = 0;
-  std::vector<int> characters_per_level;  // at the last sampled frame, levels 0..4+
+  std::vector<int> characters_per_level;  // at the last sampled frame, levels 0..7+
 };
 
-// Every kQualityEvery-th frame: each character at its level (Motion LoD: with hysteresis,
-// as the run chose it; or the coarsest) against full detail, the vertex error in pixels.
+// Every kQualityEvery-th frame: each character at its level of `ladder` (with hysteresis,
+// as the run chose it) against full detail, the error in pixels of every original vertex.
 Quality MeasureQuality(const std::vector<CharacterType>& types, std::vector<Instance> crowd,
-                       Mode mode, const Options& o) {
+                       int ladder, const Options& o) {
   Quality quality;
-  size_t max_vertices = 0;
-  for (const CharacterType& type : types) max_vertices = std::max(max_vertices, type.mesh.positions.size() / 3);
-  std::vector<float> lod_positions(3 * max_vertices), full_positions(3 * max_vertices);
-  std::vector<float> palette;
+  size_t max_vertices = 0, max_kept = 0;
+  for (const CharacterType& type : types) {
+    max_vertices = std::max(max_vertices, type.mesh.positions.size() / 3);
+    max_kept = std::max<size_t>(max_kept, type.ladders.front().level_set.joint_count());
+  }
+  std::vector<float> level_positions(3 * max_vertices), full_positions(3 * max_vertices);
+  std::vector<float> palette(max_kept * proto::kMatrixFloats);
   double sum = 0;
   uint64_t count = 0;
   for (int frame = 0; frame < o.frames; ++frame) {
@@ -343,27 +398,44 @@ Quality MeasureQuality(const std::vector<CharacterType>& types, std::vector<Inst
     if (sample) quality.characters_per_level.assign(8, 0);
     for (Instance& instance : crowd) {
       const CharacterType& type = types[static_cast<size_t>(instance.type)];
+      const Ladder& drawn = type.ladders[static_cast<size_t>(ladder)];
       const double px = PixelHeightAt(instance.distance_m);
-      instance.level = mode == Mode::kCoarsest ? static_cast<int>(type.level_set.level_count()) - 1
-                                               : type.selector->Choose(px, instance.level);
+      instance.level = drawn.selector->Choose(px, instance.level);
       if (!sample) continue;
       ++quality.characters_per_level[static_cast<size_t>(std::min(instance.level, 7))];
+      const auto [clip, t] = ClipFrame(drawn.level_set, frame, instance.phase);
       auto skin_at = [&](int level, std::vector<float>& out) {
-        const proto::LevelView& view = type.level_set.level(static_cast<uint32_t>(level));
-        const uint32_t t = static_cast<uint32_t>(frame + instance.phase) % view.frame_count();
-        const LevelSkin& skin = type.skins[static_cast<size_t>(level)];
-        const SkinFrameJob job{&skin, view.frame(t), type.level_set.rigid(),
-                               {out.data(), 3 * size_t{skin.vertex_count()}}, {}};
+        const proto::LevelView& view = drawn.level_set.level(static_cast<uint32_t>(level));
+        const std::span<float> matrices(palette.data(), view.kept_count() * proto::kMatrixFloats);
+        if (!client::PlayFrame(drawn.level_set, view, clip, t, matrices).ok()) std::abort();
+        const LevelSkin& skin = drawn.skins[static_cast<size_t>(level)];
+        const SkinFrameJob job{&skin,
+                               matrices,
+                               drawn.level_set.rigid(),
+                               {out.data(), 3 * size_t{skin.vertex_count()}},
+                               {}};
         if (!job.Run().ok()) std::abort();
       };
-      skin_at(instance.level, lod_positions);
+      skin_at(instance.level, level_positions);
       skin_at(0, full_positions);
       const double px_per_unit = px / type.height;
       const size_t p = type.mesh.positions.size() / 3;
+      const std::vector<core::SurfacePoint>& points =
+          drawn.correspondence[static_cast<size_t>(instance.level)];
       for (size_t i = 0; i < p; ++i) {
-        const double dx = lod_positions[3 * i] - full_positions[3 * i];
-        const double dy = lod_positions[3 * i + 1] - full_positions[3 * i + 1];
-        const double dz = lod_positions[3 * i + 2] - full_positions[3 * i + 2];
+        double drawn_at[3] = {0, 0, 0};
+        if (points.empty()) {
+          for (int a = 0; a < 3; ++a) drawn_at[a] = level_positions[3 * i + a];
+        } else {
+          for (int corner = 0; corner < 3; ++corner) {
+            const float w = points[i].weights[corner];
+            const uint32_t v = points[i].vertices[corner];
+            for (int a = 0; a < 3; ++a) drawn_at[a] += w * level_positions[3 * v + a];
+          }
+        }
+        const double dx = drawn_at[0] - full_positions[3 * i];
+        const double dy = drawn_at[1] - full_positions[3 * i + 1];
+        const double dz = drawn_at[2] - full_positions[3 * i + 2];
         const double error = std::sqrt(dx * dx + dy * dy + dz * dz) * px_per_unit;
         sum += error;
         quality.max_error_px = std::max(quality.max_error_px, error);
@@ -407,84 +479,109 @@ int Main(int argc, char** argv) {
   for (size_t c = 0; c < crowd.size(); ++c) {
     Instance& instance = crowd[c];
     instance.type = static_cast<int>(c % types.size());
-    instance.distance_m = std::sqrt(kNearM * kNearM + unit(random) * (kFarM * kFarM - kNearM * kNearM));
+    instance.distance_m =
+        std::sqrt(kNearM * kNearM + unit(random) * (kFarM * kFarM - kNearM * kNearM));
     instance.phase = static_cast<int>(random() % 100000);
     instance.vertex_offset = vertices;
     vertices += types[static_cast<size_t>(instance.type)].mesh.positions.size() / 3;
   }
   std::vector<float> vertex_buffer(vertices * 6);
 
-  std::printf("## Crowd: %d characters, %d frames, %zu vertices per frame\n\n", o.characters,
-              o.frames, vertices);
-  std::printf("| character | joints | vertices | levels (joints) | max error %% per level | "
-              "influences per vertex per level |\n|---|---|---|---|---|---|\n");
+  std::printf("## Crowd: %d characters, %d frames, %zu vertices per frame at full detail\n\n",
+              o.characters, o.frames, vertices);
+  std::printf(
+      "Levels by cost (every part cut): joints / vertices / mean influences / frame stride / "
+      "max error %% / cost per level\n\n| character | levels |\n|---|---|\n");
   nlohmann::json report;
   for (const CharacterType& type : types) {
-    std::string joints, errors, influences;
-    for (uint32_t l = 0; l < type.level_set.level_count(); ++l) {
-      const proto::LevelView& level = type.level_set.level(l);
-      char text[64];
-      joints += (l ? ", " : "") + std::to_string(level.kept_count());
-      std::snprintf(text, sizeof text, "%s%.2f", l ? ", " : "", level.figures().max_vertex_error_pct);
-      errors += text;
-      std::snprintf(text, sizeof text, "%s%.2f", l ? ", " : "", type.skins[l].mean_influences());
-      influences += text;
+    std::string levels;
+    const Ladder& ladder = type.ladders.front();
+    for (uint32_t l = 0; l < ladder.level_set.level_count(); ++l) {
+      const proto::LevelView& level = ladder.level_set.level(l);
+      char text[128];
+      std::snprintf(text, sizeof text, "%s%u / %u / %.2f / %u / %.2f / %.3f", l ? "; " : "",
+                    level.kept_count(), ladder.skins[l].vertex_count(),
+                    ladder.skins[l].mean_influences(), level.frame_stride(),
+                    level.figures().max_vertex_error_pct, level.cost());
+      levels += text;
     }
-    std::printf("| %s | %u | %zu | %s | %s | %s |\n", type.label.c_str(), type.level_set.joint_count(),
-                type.mesh.positions.size() / 3, joints.c_str(), errors.c_str(), influences.c_str());
+    std::printf("| %s | %s |\n", type.label.c_str(), levels.c_str());
     report["characters"].push_back({{"name", type.label},
-                                    {"joints", type.level_set.joint_count()},
-                                    {"vertices", type.mesh.positions.size() / 3}});
+                                    {"joints", ladder.level_set.joint_count()},
+                                    {"vertices", type.mesh.positions.size() / 3},
+                                    {"levels", levels}});
   }
 
-  const Quality quality = MeasureQuality(types, crowd, Mode::kMotionLod, o);
-  const Quality bound = MeasureQuality(types, crowd, Mode::kCoarsest, o);
-  std::printf("\nCharacters per level (last sampled frame, level 0 = every joint):");
-  for (size_t l = 0; l < quality.characters_per_level.size(); ++l)
-    std::printf(" L%zu %d", l, quality.characters_per_level[l]);
-  std::printf("\n\nScreen-space vertex error against full detail (every %dth frame, every vertex "
-              "of every character):\n\n| crowd | mean px | max px |\n|---|---|---|\n"
-              "| Motion LoD (budget %.2f px) | %.4f | %.3f |\n| coarsest level (bound) | %.4f | %.3f |\n\n",
-              kQualityEvery, o.budget_px, quality.mean_error_px, quality.max_error_px,
-              bound.mean_error_px, bound.max_error_px);
-  report["quality"] = {{"mean_error_px", quality.mean_error_px},
-                       {"max_error_px", quality.max_error_px},
-                       {"coarsest_mean_error_px", bound.mean_error_px},
-                       {"coarsest_max_error_px", bound.max_error_px},
-                       {"characters_per_level", quality.characters_per_level}};
+  std::printf(
+      "\nScreen-space error against full detail (every %dth frame, every vertex of every "
+      "character):\n\n| ladder | mean px | max px | characters per level (last sample) |\n"
+      "|---|---|---|---|\n",
+      kQualityEvery);
+  for (size_t k = 0; k < types.front().ladders.size(); ++k) {
+    const Quality quality = MeasureQuality(types, crowd, static_cast<int>(k), o);
+    std::string per_level;
+    for (size_t l = 0; l < quality.characters_per_level.size(); ++l)
+      per_level += (l ? " " : "") + std::string("L") + std::to_string(l) + " " +
+                   std::to_string(quality.characters_per_level[l]);
+    std::printf("| %s | %.4f | %.3f | %s |\n", kLadderKinds[k].name, quality.mean_error_px,
+                quality.max_error_px, per_level.c_str());
+    report["quality"].push_back({{"ladder", kLadderKinds[k].name},
+                                 {"mean_error_px", quality.mean_error_px},
+                                 {"max_error_px", quality.max_error_px},
+                                 {"characters_per_level", quality.characters_per_level}});
+  }
 
-  std::printf("| threads | crowd | CPU ms/frame | speedup (CPU) | wall ms/frame | speedup (wall) | "
-              "matrix MB/frame | matrix update ms | skinning ms | output ms |\n"
-              "|---|---|---|---|---|---|---|---|---|---|\n");
+  std::printf(
+      "\n| threads | crowd | CPU ms/frame | speedup (CPU) | wall ms/frame | speedup (wall) | "
+      "matrix MB/frame | matrix update ms | skinning ms | output ms |\n"
+      "|---|---|---|---|---|---|---|---|---|---|\n");
+  const int ladders = static_cast<int>(types.front().ladders.size());
   for (int threads : o.threads) {
-    constexpr Mode kModes[] = {Mode::kFullDetail, Mode::kMotionLod, Mode::kCoarsest};
-    std::vector<RunResult> runs[3];  // by kModes, interleaved
+    std::vector<std::vector<RunResult>> runs(static_cast<size_t>(ladders) +
+                                             1);  // full detail, then each ladder
     for (int r = 0; r < o.repetitions; ++r) {
-      for (int m = 0; m < 3; ++m) runs[m].push_back(RunCrowd(types, crowd, vertex_buffer, kModes[m], threads, o));
+      for (int m = -1; m < ladders; ++m)
+        runs[static_cast<size_t>(m + 1)].push_back(
+            RunCrowd(types, crowd, vertex_buffer, m, threads, o));
     }
-    const RunResult results[3] = {Median(runs[0]), Median(runs[1]), Median(runs[2])};
-    const RunResult& full = results[0];
-    for (const RunResult& result : results) {
-      const RunResult* run = &result;
-      char cpu_speedup[32] = "1", wall_speedup[32] = "1";
-      if (run->mode != Mode::kFullDetail) {
-        std::snprintf(cpu_speedup, sizeof cpu_speedup, "%.2fx",
-                      full.per_frame.total_s() / run->per_frame.total_s());
-        std::snprintf(wall_speedup, sizeof wall_speedup, "%.2fx", full.ms_per_frame / run->ms_per_frame);
+    std::vector<RunResult> results;
+    for (auto& run : runs) results.push_back(Median(run));
+    const RunResult& full = results.front();
+    const double saving = full.per_frame.total_s() - results[1].per_frame.total_s();
+    for (const RunResult& run : results) {
+      const char* name = run.ladder < 0 ? "full detail" : kLadderKinds[run.ladder].name;
+      std::printf("| %d | %s | %.2f | %.2fx | %.2f | %.2fx | %.3f | %.2f | %.2f | %.2f |\n",
+                  threads, name, run.per_frame.total_s() * 1e3,
+                  full.per_frame.total_s() / run.per_frame.total_s(), run.ms_per_frame,
+                  full.ms_per_frame / run.ms_per_frame, run.per_frame.matrix_bytes / 1e6,
+                  run.per_frame.matrix_s * 1e3, run.per_frame.skinning_s * 1e3,
+                  run.per_frame.output_s * 1e3);
+      nlohmann::json entry = {{"threads", threads},
+                              {"crowd", name},
+                              {"wall_ms_per_frame", run.ms_per_frame},
+                              {"cpu_ms_per_frame", run.per_frame.total_s() * 1e3},
+                              {"matrix_bytes_per_frame", run.per_frame.matrix_bytes},
+                              {"matrix_update_ms", run.per_frame.matrix_s * 1e3},
+                              {"skinning_ms", run.per_frame.skinning_s * 1e3},
+                              {"output_ms", run.per_frame.output_s * 1e3}};
+      // A part's share of the saving: what switching it off gives back.
+      if (run.ladder > 0 && saving > 0) {
+        entry["share_of_saving"] =
+            (run.per_frame.total_s() - results[1].per_frame.total_s()) / saving;
       }
-      std::printf("| %d | %s | %.2f | %s | %.2f | %s | %.3f | %.2f | %.2f | %.2f |\n", threads,
-                  ModeName(run->mode), run->per_frame.total_s() * 1e3, cpu_speedup,
-                  run->ms_per_frame, wall_speedup, run->per_frame.matrix_bytes / 1e6,
-                  run->per_frame.matrix_s * 1e3, run->per_frame.skinning_s * 1e3,
-                  run->per_frame.output_s * 1e3);
-      report["runs"].push_back({{"threads", threads},
-                                {"mode", ModeName(run->mode)},
-                                {"wall_ms_per_frame", run->ms_per_frame},
-                                {"cpu_ms_per_frame", run->per_frame.total_s() * 1e3},
-                                {"matrix_bytes_per_frame", run->per_frame.matrix_bytes},
-                                {"matrix_update_ms", run->per_frame.matrix_s * 1e3},
-                                {"skinning_ms", run->per_frame.skinning_s * 1e3},
-                                {"output_ms", run->per_frame.output_s * 1e3}});
+      report["runs"].push_back(entry);
+    }
+    if (saving > 0 && ladders > 1) {
+      std::printf("\nShare of the saving (%d threads), what switching a part off gives back:",
+                  threads);
+      for (int k = 1; k < ladders; ++k) {
+        std::printf(" %s %.0f%%;", kLadderKinds[k].name,
+                    100 *
+                        (results[static_cast<size_t>(k + 1)].per_frame.total_s() -
+                         results[1].per_frame.total_s()) /
+                        saving);
+      }
+      std::printf("\n\n");
     }
   }
   std::printf("\n(CPU times are summed over the threads, per frame; medians of %d runs)\n",
