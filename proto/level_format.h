@@ -45,10 +45,11 @@ static_assert(std::numeric_limits<float>::is_iec559 && sizeof(float) == 4,
 using ::motionlod::Status;
 using ::motionlod::StatusOr;
 
-// Format version written by this build. It reads every minor version of its major
-// and of major 1 (a 1.x file holds one unnamed clip of every frame); another major
-// version is refused (see docs/level-format.md, "Versioning").
-inline constexpr uint16_t kLevelFormatMajorVersion = 2;
+// Format version written by this build. It reads every minor version of its major and
+// of majors 2 (levels without their own mesh, influences or pose rate) and 1 (also one
+// unnamed clip of every frame); another major version is refused (see
+// docs/level-format.md, "Versioning").
+inline constexpr uint16_t kLevelFormatMajorVersion = 3;
 inline constexpr uint16_t kLevelFormatMinorVersion = 0;
 // The oldest major version this build reads.
 inline constexpr uint16_t kOldestReadableMajorVersion = 1;
@@ -63,6 +64,14 @@ inline constexpr uint32_t kMaxJointCount = 65535;  // joint indices and slots ar
 inline constexpr uint32_t kMaxLevelCount = 65535;
 inline constexpr size_t kMaxNameBytes = 65535;  // joint, clip and variant names, UTF-8 bytes
 inline constexpr size_t kMatrixFloats = 12;     // one 3x4 row-major K'_s(t)
+inline constexpr uint32_t kMaxInfluencesPerVertex = 8;  // a level's own influences, k
+inline constexpr uint32_t kMaxFrameStride = 16;         // a level's pose rate: fps / stride
+
+// How many frames a clip of `frame_count` frames stores at frame stride `stride`: its
+// frames 0, r, 2r, ... and its last (core/pose_rate.h computes the same).
+inline uint32_t StoredFrameCount(uint32_t frame_count, uint32_t stride) {
+  return frame_count <= 1 ? 1 : (frame_count - 2) / stride + 2;
+}
 
 // Quality figures of one level, as the bake measured them.
 struct LevelFigures {
@@ -78,7 +87,9 @@ struct LevelFigures {
   bool operator==(const LevelFigures&) const = default;
 };
 
-// One level: m kept joints.
+// One level: m kept joints; since 3.0 also, optionally, its own mesh (a subset of the
+// character's vertices with its own triangles), its own influences (k per vertex) and a
+// pose rate (every `frame_stride`-th frame of each clip stored).
 struct LevelData {
   // m original joint indices, strictly ascending; contains joint 0 (the root).
   std::vector<uint16_t> kept_joints;
@@ -87,8 +98,31 @@ struct LevelData {
   // (ComputeJointMap builds it).
   std::vector<uint16_t> joint_map;
   LevelFigures figures;
-  // T x m x 12: matrices[(t * m + s) * 12 + k], K'_s(t) as described above; finite.
+  // Each clip stores its frames 0, r, 2r, ... and its last (StoredFrameCount), r =
+  // frame_stride in [1, kMaxFrameStride]; a player interpolates the frames between two
+  // stored ones (rigid sets: slerp of the rotation and lerp of the translation; otherwise
+  // lerp of every entry). T' = sum over clips of StoredFrameCount(frames, r).
+  uint32_t frame_stride = 1;
+  // T' x m x 12: matrices[(t' * m + s) * 12 + k], K'_s of stored frame t', clip after
+  // clip, as described above; finite.
   std::vector<float> matrices;
+  // The level's own mesh: original vertex ids (strictly ascending, < the set's
+  // vertex_count) and triangles over them (3 indices into `vertices` each). Both empty:
+  // the character's whole mesh and triangles. Needs the set's vertex_count.
+  std::vector<uint32_t> vertices;
+  std::vector<uint32_t> triangles;
+  // The level's own influences, k = influences_per_vertex in [1, kMaxInfluencesPerVertex]
+  // per level vertex (its `vertices`, or the set's vertex_count), fixed width: entry
+  // (i, e) at i * k + e; slots < m; weights finite, >= 0, each vertex's summing to 1
+  // (within 1e-3). k = 0 (both empty): the client merges its own influences through the
+  // joint map.
+  uint32_t influences_per_vertex = 0;
+  std::vector<uint16_t> influence_slots;
+  std::vector<float> influence_weights;
+  // What one frame of the level costs a skinner relative to full detail (vertices x
+  // influences plus a term per joint: pipeline/cost_levels.h); finite, >= 0, 0 = not
+  // measured (files before 3.0).
+  float cost = 0;
 
   bool operator==(const LevelData&) const = default;
 };
@@ -112,6 +146,9 @@ struct LevelSetData {
   uint32_t flags = 0;        // kLevelSetFlag* bits
   uint32_t algorithm_version = 0;
   uint32_t frame_count = 0;  // T >= 1, every clip's frames
+  // The character's mesh vertex count p when levels carry their own mesh or influences
+  // (then every level's vertex ids are < p); 0 when none does.
+  uint32_t vertex_count = 0;
   // Finite, > 0; with `clips`, the first clip's (the header of a file holds the first
   // clip's fps, so that a reader of the header alone plays clip 0 right).
   double fps = 30.0;
@@ -140,7 +177,14 @@ struct LevelRef {
   std::span<const uint16_t> kept_joints;
   std::span<const uint16_t> joint_map;
   LevelFigures figures;
+  uint32_t frame_stride = 1;
   std::span<const float> matrices;
+  std::span<const uint32_t> vertices;
+  std::span<const uint32_t> triangles;
+  uint32_t influences_per_vertex = 0;
+  std::span<const uint16_t> influence_slots;
+  std::span<const float> influence_weights;
+  float cost = 0;
 };
 
 // ClipInfo by reference.
@@ -155,6 +199,7 @@ struct LevelSetRef {
   uint32_t flags = 0;
   uint32_t algorithm_version = 0;
   uint32_t frame_count = 0;
+  uint32_t vertex_count = 0;
   double fps = 0;
   std::array<uint8_t, 32> source_hash{};
   uint64_t settings_hash = 0;
@@ -204,17 +249,44 @@ struct ClipView {
   double fps = 0;
 };
 
+// Where frame t of a clip lies among a level's stored frames: between stored frames
+// `from` and `to` (indices of LevelView::frame), `fraction` of the way (0: frame `from`
+// itself, and then `to` == `from`).
+struct FrameBlend {
+  uint32_t from = 0, to = 0;
+  float fraction = 0;
+};
+
 // One level of a decoded level set; spans into the decoded buffer.
 class LevelView {
  public:
   uint32_t kept_count() const { return static_cast<uint32_t>(kept_joints_.size()); }  // m
-  uint32_t frame_count() const { return frame_count_; }                               // T
+  // T': the stored frames of every clip at the level's frame stride (T at stride 1).
+  uint32_t frame_count() const { return frame_count_; }
+  uint32_t frame_stride() const { return frame_stride_; }  // 1 in files before 3.0
   std::span<const uint16_t> kept_joints() const { return kept_joints_; }  // m, ascending
   std::span<const uint16_t> joint_map() const { return joint_map_; }      // n, slots < m
   const LevelFigures& figures() const { return figures_; }
-  // T x m x 12 floats, frame-major.
+  float cost() const { return cost_; }  // 0: not measured
+  // The level's own mesh (both empty: the character's whole mesh and triangles).
+  std::span<const uint32_t> vertices() const { return vertices_; }    // original ids, ascending
+  std::span<const uint32_t> triangles() const { return triangles_; }  // 3 per triangle
+  bool has_own_mesh() const { return !vertices_.empty(); }
+  // The level's own influences: k per level vertex, fixed width; k = 0: none.
+  uint32_t influences_per_vertex() const { return influences_per_vertex_; }
+  std::span<const uint16_t> influence_slots() const { return influence_slots_; }
+  std::span<const float> influence_weights() const { return influence_weights_; }
+  // T' x m x 12 floats, stored-frame-major.
   std::span<const float> matrices() const { return matrices_; }
-  // The m x 12 floats of frame t.
+  // The first stored frame of clip c.
+  uint32_t clip_first_stored(uint32_t c) const {
+    assert(c < clip_first_stored_.size());
+    return clip_first_stored_[c];
+  }
+  // Frame t (within the clip) of clip c of the set `clip_frame_count` long, at this
+  // level's pose rate.
+  FrameBlend Blend(uint32_t c, uint32_t t, uint32_t clip_frame_count) const;
+  // The m x 12 floats of stored frame t.
   std::span<const float> frame(uint32_t t) const {
     assert(t < frame_count_);
     return matrices_.subspan(size_t{t} * kept_joints_.size() * kMatrixFloats,
@@ -229,10 +301,18 @@ class LevelView {
  private:
   friend class LevelSetDecoder;
   uint32_t frame_count_ = 0;
+  uint32_t frame_stride_ = 1;
   std::span<const uint16_t> kept_joints_;
   std::span<const uint16_t> joint_map_;
   LevelFigures figures_;
+  float cost_ = 0;
   std::span<const float> matrices_;
+  std::span<const uint32_t> vertices_;
+  std::span<const uint32_t> triangles_;
+  uint32_t influences_per_vertex_ = 0;
+  std::span<const uint16_t> influence_slots_;
+  std::span<const float> influence_weights_;
+  std::vector<uint32_t> clip_first_stored_;  // per clip
 };
 
 // A decoded, fully validated level set. Holds O(n + L) bookkeeping of its own; every
@@ -241,7 +321,7 @@ class LevelSetView {
  public:
   using ClipView = proto::ClipView;
 
-  uint16_t major_version() const { return major_version_; }  // as written: 1 or 2
+  uint16_t major_version() const { return major_version_; }  // as written: 1, 2 or 3
   uint16_t minor_version() const { return minor_version_; }  // as written
   // As written: a file of a later minor version may carry bits this build ignores.
   uint32_t flags() const { return flags_; }
@@ -250,6 +330,7 @@ class LevelSetView {
   uint32_t joint_count() const { return static_cast<uint32_t>(parents_.size()); }  // n
   uint32_t level_count() const { return static_cast<uint32_t>(levels_.size()); }   // L
   uint32_t frame_count() const { return frame_count_; }                            // T
+  uint32_t vertex_count() const { return vertex_count_; }  // p; 0 when no level has a mesh
   double fps() const { return fps_; }  // the first clip's
   // The clips, in frame order, covering [0, T): at least one (a 1.0 file, or a file
   // written without clips: one clip named "" of every frame at fps()).
@@ -286,6 +367,7 @@ class LevelSetView {
   uint32_t flags_ = 0;
   uint32_t algorithm_version_ = 0;
   uint32_t frame_count_ = 0;
+  uint32_t vertex_count_ = 0;
   double fps_ = 0;
   std::array<uint8_t, 32> source_hash_{};
   uint64_t settings_hash_ = 0;
@@ -306,7 +388,7 @@ struct DecodeOptions {
 // asserts on any content. Errors:
 //   kInvalidArgument  `bytes` does not start on a 16-byte boundary, or is not a level
 //                     set (magic mismatch);
-//   kUnsupported      a major version other than 1 and 2 (the message names the
+//   kUnsupported      a major version other than 1, 2 and 3 (the message names the
 //                     version found and the ones this build reads);
 //   kDataLoss         truncated, corrupted (checksum) or malformed (any rule of
 //                     docs/level-format.md, "Validation"); the message says which.
