@@ -404,17 +404,18 @@ StatusOr<LevelSetView> DecodeLevelSet(std::string_view bytes, const DecodeOption
 // kNotFound when l >= view.level_count().
 StatusOr<std::string> ExtractLevel(const LevelSetView& view, uint32_t l);
 
-// Level l of `view`, frames of clip `clip` only, as a one-level, one-clip file of the
-// current version: the clip keeps its name and fps and starts at frame 0; the file's
-// frame_count and fps are the clip's; the level's figures are kept as written (the
-// bake's, over every clip). kNotFound when l >= view.level_count() or
+// Level l of `view`, the stored frames of clip `clip` only, as a one-level, one-clip file
+// of the current version: the clip keeps its name and fps and starts at frame 0; the
+// file's frame_count and fps are the clip's; the level's frame stride, mesh, influences,
+// cost and figures are kept as written (the figures are the bake's, over every clip), and
+// so is the level set's vertex_count. kNotFound when l >= view.level_count() or
 // clip >= view.clip_count().
 StatusOr<std::string> ExtractLevelClip(const LevelSetView& view, uint32_t l, uint32_t clip);
 
 // A copy of `view` as editable data (flags this build does not know dropped), so that
 // EncodeLevelSet(ToLevelSetData(view)) reproduces a current-version file byte for byte
-// (a 1.x file comes out as the 2.0 one of the same content). A single unnamed clip comes
-// back as empty `clips`.
+// (a 1.x or 2.x file comes out as the current-version one of the same content). A single
+// unnamed clip comes back as empty `clips`.
 LevelSetData ToLevelSetData(const LevelSetView& view);
 
 }  // namespace motionlod::proto
