@@ -87,6 +87,7 @@ LevelSetRef HeaderRefOf(const LevelSetView& view) {
   source.flags = view.flags() & kKnownLevelSetFlags;
   source.algorithm_version = view.algorithm_version();
   source.frame_count = view.frame_count();
+  source.vertex_count = view.vertex_count();
   source.fps = view.fps();
   source.source_hash = view.source_hash();
   source.settings_hash = view.settings_hash();
@@ -108,7 +109,28 @@ std::span<const ClipRef> ClipsToWrite(const LevelSetRef& source, ClipRef& single
 }
 
 LevelRef RefOf(const LevelView& level) {
-  return {level.kept_joints(), level.joint_map(), level.figures(), level.matrices()};
+  return {.kept_joints = level.kept_joints(),
+          .joint_map = level.joint_map(),
+          .figures = level.figures(),
+          .matrices = level.matrices(),
+          .frame_stride = level.frame_stride(),
+          .vertices = level.vertices(),
+          .triangles = level.triangles(),
+          .influences_per_vertex = level.influences_per_vertex(),
+          .influence_slots = level.influence_slots(),
+          .influence_weights = level.influence_weights(),
+          .cost = level.cost()};
+}
+
+// T', the stored frames of every clip, at each frame stride r (index r; 0 unused). Below
+// 2^64 whatever the clips: fewer than 2^32 clips of fewer than 2^32 frames each.
+using StoredFrames = std::array<uint64_t, kMaxFrameStride + 1>;
+StoredFrames StoredFramesByStride(std::span<const ClipRef> clips) {
+  StoredFrames stored{};
+  for (uint32_t r = 1; r <= kMaxFrameStride; ++r) {
+    for (const ClipRef& clip : clips) stored[r] += StoredFrameCount(clip.frame_count, r);
+  }
+  return stored;
 }
 
 // ---------------------------------------------------------------------------------
@@ -317,11 +339,123 @@ inline bool IsRotation(const float* k) {
   return ok & (det > 0.0f);
 }
 
-std::string CheckMatrixCount(size_t l, uint32_t frame_count, size_t m,
+std::string CheckFrameStride(size_t l, uint32_t stride) {
+  if (stride < 1 || stride > kMaxFrameStride) {
+    return StrCat("level ", l, ": frame stride ", stride, " is out of [1, ", kMaxFrameStride, "]");
+  }
+  return {};
+}
+
+// `stored_frames`: T' at the level's stride, at most T (the clips were checked first).
+std::string CheckMatrixCount(size_t l, uint64_t stored_frames, uint32_t stride, size_t m,
                              std::span<const float> matrices) {
-  const uint64_t expected = uint64_t{frame_count} * m * kMatrixFloats;  // < 2^54
+  const uint64_t expected = stored_frames * m * kMatrixFloats;  // < 2^54
   if (matrices.size() != expected) {
-    return StrCat("level ", l, " has ", matrices.size(), " matrix floats; T x m x 12 = ", expected);
+    return StrCat("level ", l, " has ", matrices.size(), " matrix floats; T' x m x 12 = ", expected,
+                  " (T' = ", stored_frames, " stored frames at frame stride ", stride, ")");
+  }
+  return {};
+}
+
+std::string CheckCost(size_t l, float cost) {
+  if (!(std::isfinite(cost) && cost >= 0)) {
+    return StrCat("level ", l, ": cost is ", cost, " (finite and >= 0 expected)");
+  }
+  return {};
+}
+
+// The level's own mesh: vertex ids strictly ascending below the character's vertex count,
+// triangles (exactly when there are vertices) of three indices into them.
+std::string CheckMesh(size_t l, uint32_t vertex_count, std::span<const uint32_t> vertices,
+                      std::span<const uint32_t> triangles) {
+  if (vertices.empty() != triangles.empty()) {
+    return StrCat("level ", l, " has ", vertices.size(), " vertices of its own and ",
+                  triangles.size(), " triangle indices (both or neither expected)");
+  }
+  if (vertices.empty()) return {};
+  if (vertex_count == 0) {
+    return StrCat("level ", l,
+                  " has a mesh of its own but the level set's vertex_count is 0 (the "
+                  "character's vertex count expected)");
+  }
+  for (size_t i = 1; i < vertices.size(); ++i) {
+    if (vertices[i] <= vertices[i - 1]) {
+      return StrCat("level ", l, ": its vertices are not strictly ascending at ", i, " (",
+                    vertices[i - 1], " then ", vertices[i], ")");
+    }
+  }
+  if (vertices.back() >= vertex_count) {
+    return StrCat("level ", l, ": vertex ", vertices.back(),
+                  " is out of range (vertex_count = ", vertex_count, ")");
+  }
+  if (triangles.size() % 3 != 0) {
+    return StrCat("level ", l, " has ", triangles.size(), " triangle indices, not a multiple of 3");
+  }
+  for (size_t i = 0; i < triangles.size(); ++i) {
+    if (triangles[i] >= vertices.size()) {
+      return StrCat("level ", l, ": triangle ", i / 3, " corner ", i % 3, " is vertex ",
+                    triangles[i], " of the level's ", vertices.size());
+    }
+  }
+  return {};
+}
+
+std::string CheckInfluencesPerVertex(size_t l, uint32_t k) {
+  if (k > kMaxInfluencesPerVertex) {
+    return StrCat("level ", l, ": influences_per_vertex ", k, " is out of [0, ",
+                  kMaxInfluencesPerVertex, "]");
+  }
+  return {};
+}
+
+// The level's own influences: k per vertex of its mesh (the character's without one),
+// slots below m, weights finite, >= 0 and summing to 1 per vertex.
+std::string CheckInfluences(size_t l, uint32_t vertex_count, const LevelRef& level) {
+  const uint32_t k = level.influences_per_vertex;
+  std::string problem = CheckInfluencesPerVertex(l, k);
+  if (!problem.empty()) return problem;
+  const std::span<const uint16_t> slots = level.influence_slots;
+  const std::span<const float> weights = level.influence_weights;
+  if (k == 0) {
+    if (!slots.empty() || !weights.empty()) {
+      return StrCat("level ", l, " has ", slots.size(), " influence slots and ", weights.size(),
+                    " weights but influences_per_vertex 0");
+    }
+    return {};
+  }
+  const uint64_t vertices = level.vertices.empty() ? vertex_count : level.vertices.size();
+  if (vertices == 0) {
+    return StrCat("level ", l,
+                  " has influences but no vertices (no mesh of its own and the level set's "
+                  "vertex_count is 0)");
+  }
+  const uint64_t expected = vertices * k;  // < 2^36
+  if (slots.size() != expected || weights.size() != expected) {
+    return StrCat("level ", l, " has ", slots.size(), " influence slots and ", weights.size(),
+                  " weights; V x k = ", expected, " (V = ", vertices, ", k = ", k, ")");
+  }
+  const size_t m = level.kept_joints.size();
+  for (size_t i = 0; i < slots.size(); ++i) {
+    if (slots[i] >= m) {
+      return StrCat("level ", l, ": influence ", i % k, " of vertex ", i / k, " is on slot ",
+                    slots[i], " (m = ", m, ")");
+    }
+  }
+  constexpr double kWeightSumTolerance = 1e-3;
+  for (uint64_t v = 0; v < vertices; ++v) {
+    double sum = 0;
+    for (uint32_t e = 0; e < k; ++e) {
+      const float weight = weights[v * k + e];
+      if (!(std::isfinite(weight) && weight >= 0)) {
+        return StrCat("level ", l, ": influence ", e, " of vertex ", v, " has weight ", weight,
+                      " (finite and >= 0 expected)");
+      }
+      sum += weight;
+    }
+    if (!(std::abs(sum - 1) <= kWeightSumTolerance)) {
+      return StrCat("level ", l, ": the influence weights of vertex ", v, " sum to ", sum,
+                    " (1 expected, within ", kWeightSumTolerance, ")");
+    }
   }
   return {};
 }
@@ -366,19 +500,20 @@ std::string CheckMatrixValues(size_t l, size_t m, bool rigid, std::span<const fl
 // leaves them to CheckMatrixValues: writing a level set needs only the rest.
 enum class MatrixValues { kChecked, kLeftOut };
 
-std::string CheckLevelSet(const LevelSetRef& source, bool allow_unknown_flags,
-                          const PieceRunner& run = {},
-                          MatrixValues matrix_values = MatrixValues::kChecked) {
-  if (!allow_unknown_flags && (source.flags & ~kKnownLevelSetFlags) != 0) {
-    return StrCat("unknown flag bits ", source.flags & ~kKnownLevelSetFlags);
-  }
+// The frames and clips: what the sizes of the levels' matrices follow from, so the decoder
+// checks them before it reads a level.
+std::string CheckFrames(const LevelSetRef& source) {
   if (source.frame_count == 0) return "the level set has no frame";
   if (!(std::isfinite(source.fps) && source.fps > 0)) {
     return StrCat("fps is ", source.fps, " (finite and > 0 expected)");
   }
-  std::string problem = CheckClips(source);
-  if (!problem.empty()) return problem;
-  problem = NameProblem(source.variant_name, /*allow_empty=*/true);
+  return CheckClips(source);
+}
+
+// Everything but the flags and the frames (CheckFrames, which must have passed).
+std::string CheckNamesAndLevels(const LevelSetRef& source, const PieceRunner& run,
+                                MatrixValues matrix_values) {
+  std::string problem = NameProblem(source.variant_name, /*allow_empty=*/true);
   if (!problem.empty()) return StrCat("the variant name ", problem);
   problem = CheckSkeleton(source);
   if (!problem.empty()) return problem;
@@ -388,6 +523,8 @@ std::string CheckLevelSet(const LevelSetRef& source, bool allow_unknown_flags,
                   ")");
   }
   const bool rigid = (source.flags & kLevelSetFlagRigid) != 0;
+  ClipRef single;
+  const StoredFrames stored_frames = StoredFramesByStride(ClipsToWrite(source, single));
   // Levels are checked independently, each as a piece; the first level's problem is the
   // one reported, whatever order they ran in.
   std::vector<std::string> problems(source.levels.size());
@@ -400,10 +537,16 @@ std::string CheckLevelSet(const LevelSetRef& source, bool allow_unknown_flags,
       level_problem = CheckJointMap(l, source.parents, level.kept_joints, level.joint_map);
     }
     if (level_problem.empty()) level_problem = CheckFigures(l, level.figures);
+    if (level_problem.empty()) level_problem = CheckFrameStride(l, level.frame_stride);
     if (level_problem.empty()) {
-      level_problem =
-          CheckMatrixCount(l, source.frame_count, level.kept_joints.size(), level.matrices);
+      level_problem = CheckMatrixCount(l, stored_frames[level.frame_stride], level.frame_stride,
+                                       level.kept_joints.size(), level.matrices);
     }
+    if (level_problem.empty()) {
+      level_problem = CheckMesh(l, source.vertex_count, level.vertices, level.triangles);
+    }
+    if (level_problem.empty()) level_problem = CheckInfluences(l, source.vertex_count, level);
+    if (level_problem.empty()) level_problem = CheckCost(l, level.cost);
     if (level_problem.empty() && matrix_values == MatrixValues::kChecked) {
       level_problem = CheckMatrixValues(l, level.kept_joints.size(), rigid, level.matrices);
     }
@@ -412,6 +555,16 @@ std::string CheckLevelSet(const LevelSetRef& source, bool allow_unknown_flags,
     if (!level_problem.empty()) return std::move(level_problem);
   }
   return {};
+}
+
+std::string CheckLevelSet(const LevelSetRef& source, const PieceRunner& run = {},
+                          MatrixValues matrix_values = MatrixValues::kChecked) {
+  if ((source.flags & ~kKnownLevelSetFlags) != 0) {
+    return StrCat("unknown flag bits ", source.flags & ~kKnownLevelSetFlags);
+  }
+  std::string problem = CheckFrames(source);
+  if (!problem.empty()) return problem;
+  return CheckNamesAndLevels(source, run, matrix_values);
 }
 
 // ---------------------------------------------------------------------------------
@@ -444,7 +597,6 @@ uint64_t ClipTableBytes(std::span<const ClipRef> clips, uint32_t clip_record_siz
 
 Layout PlanLayout(const LevelSetRef& source, const WriterOptions& options) {
   const uint64_t n = source.parents.size();
-  const uint64_t frame_count = source.frame_count;
   Layout layout;
   auto add = [&](SectionKind kind, uint32_t level, uint64_t size) {
     layout.sections.push_back({static_cast<uint32_t>(kind), level, 0, size});
@@ -457,12 +609,17 @@ Layout PlanLayout(const LevelSetRef& source, const WriterOptions& options) {
   ClipRef single;
   add(SectionKind::kClipTable, kNoLevel,
       ClipTableBytes(ClipsToWrite(source, single), options.clip_record_size));
+  // The arrays' own sizes: those of a valid level set (EncodedLevelSetSize does not check).
   for (size_t l = 0; l < source.levels.size(); ++l) {
-    const uint64_t m = source.levels[l].kept_joints.size();
+    const LevelRef& ref = source.levels[l];
     const auto level = static_cast<uint32_t>(l);
-    add(SectionKind::kKeptJoints, level, 2 * m);
+    add(SectionKind::kKeptJoints, level, ref.kept_joints.size_bytes());
     add(SectionKind::kJointMap, level, 2 * n);
-    add(SectionKind::kMatrices, level, frame_count * m * kMatrixFloats * sizeof(float));
+    add(SectionKind::kMatrices, level, ref.matrices.size_bytes());
+    add(SectionKind::kVertices, level, ref.vertices.size_bytes());
+    add(SectionKind::kTriangles, level, ref.triangles.size_bytes());
+    add(SectionKind::kInfluenceSlots, level, ref.influence_slots.size_bytes());
+    add(SectionKind::kInfluenceWeights, level, ref.influence_weights.size_bytes());
   }
   for (const ExtraSection& extra : options.extra_sections) {
     layout.sections.push_back({extra.kind, extra.level, 0, extra.bytes.size()});
@@ -550,6 +707,7 @@ void WriteLevelSet(const LevelSetRef& source, const WriterOptions& options, cons
   const std::span<const ClipRef> clips = ClipsToWrite(source, single);
   Store<uint32_t>(header + internal::kOffsetClipCount, static_cast<uint32_t>(clips.size()));
   Store<uint32_t>(header + internal::kOffsetClipRecordSize, options.clip_record_size);
+  Store<uint32_t>(header + internal::kOffsetVertexCount, source.vertex_count);
   put(header, sizeof header);
   fill(options.header_size - kHeaderSize, std::byte{options.extension_fill});
 
@@ -588,6 +746,14 @@ void WriteLevelSet(const LevelSetRef& source, const WriterOptions& options, cons
                               level.figures.mean_normal_error_deg, level.figures.mean_E,
                               level.figures.max_px_for_1px_error};
     std::memcpy(record + internal::kRecordOffsetFigures, figures, sizeof figures);
+    Store<uint32_t>(record + internal::kRecordOffsetFrameStride, level.frame_stride);
+    Store<uint32_t>(record + internal::kRecordOffsetInfluencesPerVertex,
+                    level.influences_per_vertex);
+    Store<uint32_t>(record + internal::kRecordOffsetVertexCount,
+                    static_cast<uint32_t>(level.vertices.size()));
+    Store<uint32_t>(record + internal::kRecordOffsetTriangleCount,
+                    static_cast<uint32_t>(level.triangles.size() / 3));
+    Store<float>(record + internal::kRecordOffsetCost, level.cost);
     put(record, sizeof record);
     fill(options.level_record_size - kLevelRecordSize, std::byte{options.extension_fill});
   }
@@ -609,6 +775,10 @@ void WriteLevelSet(const LevelSetRef& source, const WriterOptions& options, cons
     write_bytes(level.kept_joints.data(), level.kept_joints.size_bytes());
     write_bytes(level.joint_map.data(), level.joint_map.size_bytes());
     write_bytes(level.matrices.data(), level.matrices.size_bytes());
+    write_bytes(level.vertices.data(), level.vertices.size_bytes());
+    write_bytes(level.triangles.data(), level.triangles.size_bytes());
+    write_bytes(level.influence_slots.data(), level.influence_slots.size_bytes());
+    write_bytes(level.influence_weights.data(), level.influence_weights.size_bytes());
   }
   for (const ExtraSection& extra : options.extra_sections) {
     write_bytes(extra.bytes.data(), extra.bytes.size());
@@ -690,19 +860,25 @@ StatusOr<LevelSetView> LevelSetDecoder::Decode(std::span<const std::byte> bytes,
   }
   const auto major = Load<uint16_t>(data + internal::kOffsetMajorVersion);
   const auto minor = Load<uint16_t>(data + internal::kOffsetMinorVersion);
-  static_assert(kOldestReadableMajorVersion == 1 && kLevelFormatMajorVersion == 2);
-  if (major != 1 && major != kLevelFormatMajorVersion) {
+  static_assert(kOldestReadableMajorVersion == 1 && kLevelFormatMajorVersion == 3);
+  if (major < kOldestReadableMajorVersion || major > kLevelFormatMajorVersion) {
     return Unsupported(StrCat("level format version ", major, ".", minor,
-                              " is not supported (this build reads versions 1.x and ",
+                              " is not supported (this build reads versions 1.x, 2.x and ",
                               kLevelFormatMajorVersion, ".x)"));
   }
-  // 1.x has no clip table: one unnamed clip of every frame, at the header's fps.
+  // 1.x has no clip table: one unnamed clip of every frame, at the header's fps. 1.x and
+  // 2.x levels have a 32-byte record and three sections: every frame stored, no mesh or
+  // influences of their own, no cost.
   const bool v1 = major == 1;
+  const bool v3 = major == kLevelFormatMajorVersion;
   // A file of a later minor version may extend the header, the level and clip records,
   // set flag bits and fill reserved fields this build does not know, and append
-  // sections; one of a minor version this build knows may not (1.0 is the last 1.x).
-  const bool from_later_minor = minor > (v1 ? 0 : kLevelFormatMinorVersion);
+  // sections; one of a minor version this build knows may not (1.0 and 2.0 are the last
+  // of theirs).
+  const bool from_later_minor = minor > (v3 ? kLevelFormatMinorVersion : 0);
   const uint32_t global_sections = v1 ? internal::kV1GlobalSectionCount : kGlobalSectionCount;
+  const uint32_t sections_per_level = v3 ? kSectionsPerLevel : internal::kV2SectionsPerLevel;
+  const uint32_t known_record_size = v3 ? kLevelRecordSize : internal::kV2LevelRecordSize;
   if (size < kHeaderSize + kTrailerSize) {
     return malformed(StrCat("truncated: ", size, " bytes cannot hold header and trailer"));
   }
@@ -741,8 +917,8 @@ StatusOr<LevelSetView> LevelSetDecoder::Decode(std::span<const std::byte> bytes,
   if (header_size > trailer_offset) {
     return malformed(StrCat("header size ", header_size, " runs past the end of the file"));
   }
-  if (level_record_size < kLevelRecordSize || level_record_size % 4 != 0 ||
-      (!from_later_minor && level_record_size != kLevelRecordSize)) {
+  if (level_record_size < known_record_size || level_record_size % 4 != 0 ||
+      (!from_later_minor && level_record_size != known_record_size)) {
     return malformed(StrCat("level record size ", level_record_size, " is invalid for version ",
                             major, ".", minor));
   }
@@ -758,9 +934,14 @@ StatusOr<LevelSetView> LevelSetDecoder::Decode(std::span<const std::byte> bytes,
     if ((flags & ~kKnownLevelSetFlags) != 0) {
       return malformed(StrCat("unknown flag bits ", flags & ~kKnownLevelSetFlags));
     }
-    const bool reserved_zero = v1 ? Load<uint32_t>(data + internal::kV1OffsetReserved0) == 0 &&
-                                        Load<uint64_t>(data + internal::kV1OffsetReserved1) == 0
-                                  : Load<uint32_t>(data + internal::kOffsetReserved) == 0;
+    // 3.x has none: offset 108 holds the vertex count.
+    bool reserved_zero = true;
+    if (v1) {
+      reserved_zero = Load<uint32_t>(data + internal::kV1OffsetReserved0) == 0 &&
+                      Load<uint64_t>(data + internal::kV1OffsetReserved1) == 0;
+    } else if (!v3) {
+      reserved_zero = Load<uint32_t>(data + internal::kV2OffsetReserved) == 0;
+    }
     if (!reserved_zero) return malformed("reserved header fields are not zero");
   }
   if (joint_count == 0 || joint_count > kMaxJointCount) {
@@ -778,7 +959,7 @@ StatusOr<LevelSetView> LevelSetDecoder::Decode(std::span<const std::byte> bytes,
   // Directory: the known sections in canonical order, then (later minor versions only)
   // sections this build skips. Every section starts on the first 16-byte boundary
   // after its predecessor, and every byte between is zero.
-  const uint64_t known_sections = global_sections + uint64_t{kSectionsPerLevel} * level_count;
+  const uint64_t known_sections = global_sections + uint64_t{sections_per_level} * level_count;
   if (section_count < known_sections || (!from_later_minor && section_count != known_sections)) {
     return malformed(StrCat("section count ", section_count, " for ", level_count,
                             " levels (expected ", known_sections, ")"));
@@ -823,8 +1004,8 @@ StatusOr<LevelSetView> LevelSetDecoder::Decode(std::span<const std::byte> bytes,
       } else {
         const uint64_t k = i - global_sections;
         expected_kind = static_cast<SectionKind>(static_cast<uint32_t>(SectionKind::kKeptJoints) +
-                                                 k % kSectionsPerLevel);
-        expected_level = static_cast<uint32_t>(k / kSectionsPerLevel);
+                                                 k % sections_per_level);
+        expected_level = static_cast<uint32_t>(k / sections_per_level);
       }
       if (kind != static_cast<uint32_t>(expected_kind) || level != expected_level) {
         return malformed(
@@ -897,6 +1078,14 @@ StatusOr<LevelSetView> LevelSetDecoder::Decode(std::span<const std::byte> bytes,
   }
   // In place: the offset is a multiple of 16 and so is the buffer's address.
   source.parents = {reinterpret_cast<const int32_t*>(data + parents.offset), n};
+  source.vertex_count = v3 ? Load<uint32_t>(data + internal::kOffsetVertexCount) : 0;
+  // The clips before the levels: the levels' matrix sizes follow from their frame counts,
+  // which once checked add up to T, so that T' <= T < 2^32.
+  problem = CheckFrames(source);
+  if (!problem.empty()) return malformed(std::move(problem));
+  ClipRef single;
+  const std::span<const ClipRef> clips = ClipsToWrite(source, single);
+  const StoredFrames stored_frames = StoredFramesByStride(clips);
 
   source.levels.resize(level_count);
   for (uint32_t l = 0; l < level_count; ++l) {
@@ -905,30 +1094,72 @@ StatusOr<LevelSetView> LevelSetDecoder::Decode(std::span<const std::byte> bytes,
     if (m == 0 || m > n) {
       return malformed(StrCat("level ", l, " keeps ", m, " joints of ", n));
     }
-    if (!from_later_minor && (Load<uint32_t>(record + internal::kRecordOffsetReserved) != 0 ||
-                              Load<uint32_t>(record + internal::kRecordOffsetReserved + 4) != 0)) {
+    LevelRef& level = source.levels[l];
+    uint32_t level_vertices = 0;
+    uint32_t triangle_count = 0;
+    bool reserved_zero;
+    if (v3) {
+      level.frame_stride = Load<uint32_t>(record + internal::kRecordOffsetFrameStride);
+      level.influences_per_vertex =
+          Load<uint32_t>(record + internal::kRecordOffsetInfluencesPerVertex);
+      level_vertices = Load<uint32_t>(record + internal::kRecordOffsetVertexCount);
+      triangle_count = Load<uint32_t>(record + internal::kRecordOffsetTriangleCount);
+      level.cost = Load<float>(record + internal::kRecordOffsetCost);
+      reserved_zero = Load<uint32_t>(record + internal::kRecordOffsetReserved) == 0;
+    } else {
+      reserved_zero = Load<uint64_t>(record + internal::kV2RecordOffsetReserved) == 0;
+    }
+    if (!from_later_minor && !reserved_zero) {
       return malformed(StrCat("level ", l, ": reserved record fields are not zero"));
     }
+    // The sizes below follow from these two.
+    problem = CheckFrameStride(l, level.frame_stride);
+    if (problem.empty()) problem = CheckInfluencesPerVertex(l, level.influences_per_vertex);
+    if (!problem.empty()) return malformed(std::move(problem));
+    const uint32_t k = level.influences_per_vertex;
     float figures[5];
     std::memcpy(figures, record + internal::kRecordOffsetFigures, sizeof figures);
-    const Section& kept = sections[global_sections + kSectionsPerLevel * l];
-    const Section& map = sections[global_sections + kSectionsPerLevel * l + 1];
-    const Section& matrices = sections[global_sections + kSectionsPerLevel * l + 2];
-    const uint64_t matrix_bytes = uint64_t{frame_count} * m * kMatrixFloats * sizeof(float);
-    if (kept.size != 2 * uint64_t{m} || map.size != 2 * n || matrices.size != matrix_bytes) {
-      return malformed(StrCat("level ", l, ": sections of ", kept.size, ", ", map.size, " and ",
-                              matrices.size, " bytes; expected ", 2 * uint64_t{m}, ", ", 2 * n,
-                              " and ", matrix_bytes, " for m = ", m, ", T = ", frame_count));
-    }
-    LevelRef& level = source.levels[l];
-    level.kept_joints = {reinterpret_cast<const uint16_t*>(data + kept.offset), m};
-    level.joint_map = {reinterpret_cast<const uint16_t*>(data + map.offset), n};
-    level.matrices = {reinterpret_cast<const float*>(data + matrices.offset),
-                      uint64_t{frame_count} * m * kMatrixFloats};
     level.figures = {figures[0], figures[1], figures[2], figures[3], figures[4]};
+
+    // Every count below 2^32, k <= 8, T' <= T: no product wraps.
+    const uint64_t frames = stored_frames[level.frame_stride];
+    const uint64_t influence_entries =
+        uint64_t{k} * (level_vertices != 0 ? level_vertices : source.vertex_count);
+    const uint64_t counts[kSectionsPerLevel] = {m,
+                                                n,
+                                                frames * m * kMatrixFloats,
+                                                level_vertices,
+                                                3 * uint64_t{triangle_count},
+                                                influence_entries,
+                                                influence_entries};
+    constexpr uint64_t kElementBytes[kSectionsPerLevel] = {2, 2, 4, 4, 4, 2, 4};
+    constexpr const char* kSectionNames[kSectionsPerLevel] = {
+        "kept joints", "joint map",       "matrices",         "vertices",
+        "triangles",   "influence slots", "influence weights"};
+    const size_t first = global_sections + uint64_t{sections_per_level} * l;
+    for (uint32_t i = 0; i < sections_per_level; ++i) {
+      if (sections[first + i].size != counts[i] * kElementBytes[i]) {
+        return malformed(StrCat(
+            "level ", l, ": the ", kSectionNames[i], " section is ", sections[first + i].size,
+            " bytes; expected ", counts[i] * kElementBytes[i], " for m = ", m, ", n = ", n,
+            ", T' = ", frames, " (T = ", frame_count, ", frame stride ", level.frame_stride, "), ",
+            level_vertices, " vertices, ", triangle_count, " triangles, k = ", k));
+      }
+    }
+    // In place, as the parents; a 2.x level's sections past the matrices stay empty.
+    const auto at = [&](uint32_t i) { return data + sections[first + i].offset; };
+    level.kept_joints = {reinterpret_cast<const uint16_t*>(at(0)), counts[0]};
+    level.joint_map = {reinterpret_cast<const uint16_t*>(at(1)), counts[1]};
+    level.matrices = {reinterpret_cast<const float*>(at(2)), counts[2]};
+    if (v3) {
+      level.vertices = {reinterpret_cast<const uint32_t*>(at(3)), counts[3]};
+      level.triangles = {reinterpret_cast<const uint32_t*>(at(4)), counts[4]};
+      level.influence_slots = {reinterpret_cast<const uint16_t*>(at(5)), counts[5]};
+      level.influence_weights = {reinterpret_cast<const float*>(at(6)), counts[6]};
+    }
   }
 
-  problem = CheckLevelSet(source, /*allow_unknown_flags=*/from_later_minor);
+  problem = CheckNamesAndLevels(source, {}, MatrixValues::kChecked);
   if (!problem.empty()) return malformed(std::move(problem));
 
   LevelSetView view;
@@ -938,6 +1169,7 @@ StatusOr<LevelSetView> LevelSetDecoder::Decode(std::span<const std::byte> bytes,
   view.flags_ = flags;
   view.algorithm_version_ = source.algorithm_version;
   view.frame_count_ = frame_count;
+  view.vertex_count_ = source.vertex_count;
   view.fps_ = source.fps;
   view.source_hash_ = source.source_hash;
   view.settings_hash_ = source.settings_hash;
@@ -946,15 +1178,28 @@ StatusOr<LevelSetView> LevelSetDecoder::Decode(std::span<const std::byte> bytes,
   view.parents_ = source.parents;
   view.levels_.resize(level_count);
   for (uint32_t l = 0; l < level_count; ++l) {
+    const LevelRef& ref = source.levels[l];
     LevelView& level = view.levels_[l];
-    level.frame_count_ = frame_count;
-    level.kept_joints_ = source.levels[l].kept_joints;
-    level.joint_map_ = source.levels[l].joint_map;
-    level.figures_ = source.levels[l].figures;
-    level.matrices_ = source.levels[l].matrices;
+    level.frame_count_ = static_cast<uint32_t>(stored_frames[ref.frame_stride]);
+    level.frame_stride_ = ref.frame_stride;
+    level.kept_joints_ = ref.kept_joints;
+    level.joint_map_ = ref.joint_map;
+    level.figures_ = ref.figures;
+    level.cost_ = ref.cost;
+    level.matrices_ = ref.matrices;
+    level.vertices_ = ref.vertices;
+    level.triangles_ = ref.triangles;
+    level.influences_per_vertex_ = ref.influences_per_vertex;
+    level.influence_slots_ = ref.influence_slots;
+    level.influence_weights_ = ref.influence_weights;
+    // O(C) a level, which the file's size bounds: each clip stores a frame of m matrices.
+    level.clip_first_stored_.resize(clips.size());
+    uint32_t first_stored = 0;
+    for (size_t c = 0; c < clips.size(); ++c) {
+      level.clip_first_stored_[c] = first_stored;
+      first_stored += StoredFrameCount(clips[c].frame_count, ref.frame_stride);
+    }
   }
-  ClipRef single;
-  const std::span<const ClipRef> clips = ClipsToWrite(source, single);
   view.clips_.reserve(clips.size());
   for (const ClipRef& clip : clips) {
     view.clips_.push_back({clip.name, clip.first_frame, clip.frame_count, clip.fps});
@@ -970,6 +1215,7 @@ LevelSetRef RefOf(const LevelSetData& data) {
   source.flags = data.flags;
   source.algorithm_version = data.algorithm_version;
   source.frame_count = data.frame_count;
+  source.vertex_count = data.vertex_count;
   source.fps = data.fps;
   source.source_hash = data.source_hash;
   source.settings_hash = data.settings_hash;
@@ -978,13 +1224,41 @@ LevelSetRef RefOf(const LevelSetData& data) {
   source.parents = data.parents;
   source.levels.reserve(data.levels.size());
   for (const LevelData& level : data.levels) {
-    source.levels.push_back({level.kept_joints, level.joint_map, level.figures, level.matrices});
+    source.levels.push_back({.kept_joints = level.kept_joints,
+                             .joint_map = level.joint_map,
+                             .figures = level.figures,
+                             .matrices = level.matrices,
+                             .frame_stride = level.frame_stride,
+                             .vertices = level.vertices,
+                             .triangles = level.triangles,
+                             .influences_per_vertex = level.influences_per_vertex,
+                             .influence_slots = level.influence_slots,
+                             .influence_weights = level.influence_weights,
+                             .cost = level.cost});
   }
   source.clips.reserve(data.clips.size());
   for (const ClipInfo& clip : data.clips) {
     source.clips.push_back({clip.name, clip.first_frame, clip.frame_count, clip.fps});
   }
   return source;
+}
+
+FrameBlend LevelView::Blend(uint32_t c, uint32_t t, uint32_t clip_frame_count) const {
+  assert(c < clip_first_stored_.size() && t < clip_frame_count);
+  const uint32_t first = clip_first_stored_[c];
+  const uint32_t r = frame_stride_;
+  if (t == clip_frame_count - 1) {
+    const uint32_t last = first + StoredFrameCount(clip_frame_count, r) - 1;
+    return {last, last, 0.0f};
+  }
+  // Between stored frame k (frame k r) and the next: frame k r + r, or the clip's last
+  // where that comes first.
+  const uint32_t k = t / r;
+  const uint32_t from_frame = k * r;
+  if (t == from_frame) return {first + k, first + k, 0.0f};
+  const uint32_t to_frame = std::min(from_frame + r, clip_frame_count - 1);
+  return {first + k, first + k + 1,
+          static_cast<float>(t - from_frame) / static_cast<float>(to_frame - from_frame)};
 }
 
 int LevelSetView::FindClip(std::string_view name) const {
@@ -995,7 +1269,7 @@ int LevelSetView::FindClip(std::string_view name) const {
 }
 
 Status ValidateLevelSet(const LevelSetData& data, const PieceRunner& run) {
-  std::string problem = CheckLevelSet(RefOf(data), /*allow_unknown_flags=*/false, run);
+  std::string problem = CheckLevelSet(RefOf(data), run);
   if (!problem.empty()) return InvalidArgument(std::move(problem));
   return Status::Ok();
 }
@@ -1085,10 +1359,13 @@ StatusOr<std::string> ExtractLevelClip(const LevelSetView& view, uint32_t l, uin
   source.frame_count = kept.frame_count;
   source.fps = kept.fps;
   source.clips = {{kept.name, 0, kept.frame_count, kept.fps}};
-  LevelRef level = RefOf(view.level(l));
+  // The clip's stored frames at the level's stride.
+  const LevelView& chosen = view.level(l);
+  LevelRef level = RefOf(chosen);
   const size_t frame_floats = level.kept_joints.size() * kMatrixFloats;
   level.matrices =
-      level.matrices.subspan(kept.first_frame * frame_floats, kept.frame_count * frame_floats);
+      level.matrices.subspan(chosen.clip_first_stored(clip) * frame_floats,
+                             StoredFrameCount(kept.frame_count, level.frame_stride) * frame_floats);
   source.levels.push_back(level);
   return EncodeSource(source, WriterOptions{});
 }
@@ -1099,6 +1376,7 @@ LevelSetData ToLevelSetData(const LevelSetView& view) {
   data.flags = view.flags() & kKnownLevelSetFlags;
   data.algorithm_version = view.algorithm_version();
   data.frame_count = view.frame_count();
+  data.vertex_count = view.vertex_count();
   data.fps = view.fps();
   data.source_hash = view.source_hash();
   data.settings_hash = view.settings_hash();
@@ -1106,10 +1384,19 @@ LevelSetData ToLevelSetData(const LevelSetView& view) {
   data.parents.assign(view.parents().begin(), view.parents().end());
   data.levels.reserve(view.level_count());
   for (const LevelView& level : view.levels()) {
-    data.levels.push_back({{level.kept_joints().begin(), level.kept_joints().end()},
-                           {level.joint_map().begin(), level.joint_map().end()},
-                           level.figures(),
-                           {level.matrices().begin(), level.matrices().end()}});
+    LevelData& copy = data.levels.emplace_back();
+    copy.kept_joints.assign(level.kept_joints().begin(), level.kept_joints().end());
+    copy.joint_map.assign(level.joint_map().begin(), level.joint_map().end());
+    copy.figures = level.figures();
+    copy.frame_stride = level.frame_stride();
+    copy.matrices.assign(level.matrices().begin(), level.matrices().end());
+    copy.vertices.assign(level.vertices().begin(), level.vertices().end());
+    copy.triangles.assign(level.triangles().begin(), level.triangles().end());
+    copy.influences_per_vertex = level.influences_per_vertex();
+    copy.influence_slots.assign(level.influence_slots().begin(), level.influence_slots().end());
+    copy.influence_weights.assign(level.influence_weights().begin(),
+                                  level.influence_weights().end());
+    copy.cost = level.cost();
   }
   // A single unnamed clip is what empty `clips` write.
   if (!(view.clip_count() == 1 && view.clip(0).name.empty())) {
@@ -1127,8 +1414,7 @@ StatusOr<std::string> EncodeLevelSetWithOptions(const LevelSetRef& source,
                                                 const WriterOptions& options,
                                                 const PieceRunner& run) {
   // (On this thread: without the values, a level's check is too short to hand to another.)
-  std::string problem =
-      CheckLevelSet(source, /*allow_unknown_flags=*/false, {}, MatrixValues::kLeftOut);
+  std::string problem = CheckLevelSet(source, {}, MatrixValues::kLeftOut);
   if (!problem.empty()) return InvalidArgument(std::move(problem));
   // The matrices' values are checked beside the writing and its checksum, which need only
   // what was checked above (a level set that then fails is dropped): on two threads the

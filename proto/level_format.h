@@ -97,7 +97,7 @@ struct LevelData {
   // original joint j: its own slot when j is kept, else its nearest kept ancestor's
   // (ComputeJointMap builds it).
   std::vector<uint16_t> joint_map;
-  LevelFigures figures;
+  LevelFigures figures = {};
   // Each clip stores its frames 0, r, 2r, ... and its last (StoredFrameCount), r =
   // frame_stride in [1, kMaxFrameStride]; a player interpolates the frames between two
   // stored ones (rigid sets: slerp of the rotation and lerp of the translation; otherwise
@@ -109,16 +109,16 @@ struct LevelData {
   // The level's own mesh: original vertex ids (strictly ascending, < the set's
   // vertex_count) and triangles over them (3 indices into `vertices` each). Both empty:
   // the character's whole mesh and triangles. Needs the set's vertex_count.
-  std::vector<uint32_t> vertices;
-  std::vector<uint32_t> triangles;
+  std::vector<uint32_t> vertices = {};
+  std::vector<uint32_t> triangles = {};
   // The level's own influences, k = influences_per_vertex in [1, kMaxInfluencesPerVertex]
   // per level vertex (its `vertices`, or the set's vertex_count), fixed width: entry
   // (i, e) at i * k + e; slots < m; weights finite, >= 0, each vertex's summing to 1
   // (within 1e-3). k = 0 (both empty): the client merges its own influences through the
   // joint map.
   uint32_t influences_per_vertex = 0;
-  std::vector<uint16_t> influence_slots;
-  std::vector<float> influence_weights;
+  std::vector<uint16_t> influence_slots = {};
+  std::vector<float> influence_weights = {};
   // What one frame of the level costs a skinner relative to full detail (vertices x
   // influences plus a term per joint: pipeline/cost_levels.h); finite, >= 0, 0 = not
   // measured (files before 3.0).
@@ -176,14 +176,16 @@ struct LevelSetData {
 struct LevelRef {
   std::span<const uint16_t> kept_joints;
   std::span<const uint16_t> joint_map;
-  LevelFigures figures;
-  uint32_t frame_stride = 1;
+  LevelFigures figures = {};
+  // Right after the figures, unlike in LevelData: a writer of 2.0 levels that initialises
+  // {kept_joints, joint_map, figures, matrices} by position still means the same.
   std::span<const float> matrices;
-  std::span<const uint32_t> vertices;
-  std::span<const uint32_t> triangles;
+  uint32_t frame_stride = 1;
+  std::span<const uint32_t> vertices = {};
+  std::span<const uint32_t> triangles = {};
   uint32_t influences_per_vertex = 0;
-  std::span<const uint16_t> influence_slots;
-  std::span<const float> influence_weights;
+  std::span<const uint16_t> influence_slots = {};
+  std::span<const float> influence_weights = {};
   float cost = 0;
 };
 
@@ -263,7 +265,7 @@ class LevelView {
   uint32_t kept_count() const { return static_cast<uint32_t>(kept_joints_.size()); }  // m
   // T': the stored frames of every clip at the level's frame stride (T at stride 1).
   uint32_t frame_count() const { return frame_count_; }
-  uint32_t frame_stride() const { return frame_stride_; }  // 1 in files before 3.0
+  uint32_t frame_stride() const { return frame_stride_; }                 // 1 in files before 3.0
   std::span<const uint16_t> kept_joints() const { return kept_joints_; }  // m, ascending
   std::span<const uint16_t> joint_map() const { return joint_map_; }      // n, slots < m
   const LevelFigures& figures() const { return figures_; }
@@ -331,7 +333,7 @@ class LevelSetView {
   uint32_t level_count() const { return static_cast<uint32_t>(levels_.size()); }   // L
   uint32_t frame_count() const { return frame_count_; }                            // T
   uint32_t vertex_count() const { return vertex_count_; }  // p; 0 when no level has a mesh
-  double fps() const { return fps_; }  // the first clip's
+  double fps() const { return fps_; }                      // the first clip's
   // The clips, in frame order, covering [0, T): at least one (a 1.0 file, or a file
   // written without clips: one clip named "" of every frame at fps()).
   std::span<const ClipView> clips() const { return clips_; }
@@ -402,17 +404,18 @@ StatusOr<LevelSetView> DecodeLevelSet(std::string_view bytes, const DecodeOption
 // kNotFound when l >= view.level_count().
 StatusOr<std::string> ExtractLevel(const LevelSetView& view, uint32_t l);
 
-// Level l of `view`, frames of clip `clip` only, as a one-level, one-clip file of the
-// current version: the clip keeps its name and fps and starts at frame 0; the file's
-// frame_count and fps are the clip's; the level's figures are kept as written (the
-// bake's, over every clip). kNotFound when l >= view.level_count() or
+// Level l of `view`, the stored frames of clip `clip` only, as a one-level, one-clip file
+// of the current version: the clip keeps its name and fps and starts at frame 0; the
+// file's frame_count and fps are the clip's; the level's frame stride, mesh, influences,
+// cost and figures are kept as written (the figures are the bake's, over every clip), and
+// so is the level set's vertex_count. kNotFound when l >= view.level_count() or
 // clip >= view.clip_count().
 StatusOr<std::string> ExtractLevelClip(const LevelSetView& view, uint32_t l, uint32_t clip);
 
 // A copy of `view` as editable data (flags this build does not know dropped), so that
 // EncodeLevelSet(ToLevelSetData(view)) reproduces a current-version file byte for byte
-// (a 1.x file comes out as the 2.0 one of the same content). A single unnamed clip comes
-// back as empty `clips`.
+// (a 1.x or 2.x file comes out as the current-version one of the same content). A single
+// unnamed clip comes back as empty `clips`.
 LevelSetData ToLevelSetData(const LevelSetView& view);
 
 }  // namespace motionlod::proto

@@ -3,6 +3,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <functional>
@@ -14,6 +15,7 @@
 #include "proto/checksum.h"
 #include "proto/level_format_internal.h"
 #include "tests/proto/level_format_v1.h"
+#include "tests/proto/level_format_v2.h"
 
 namespace motionlod::proto {
 namespace {
@@ -94,6 +96,51 @@ LevelSetData MakeRigidSample(uint32_t frames = 2) {
 LevelSetData MakeClipSample() {
   LevelSetData data = MakeSample(6);
   data.clips = {{"walk", 0, 3, 29.97}, {"jump", 3, 2, 60.0}, {"idle \xC3\xA9", 5, 1, 24.0}};
+  return data;
+}
+
+// Clip after clip, the level's stored frames at `stride` of every clip: frame t of the
+// level set is SampleValue(l, t, ...), as in MakeLevel.
+std::vector<float> StoredSampleMatrices(size_t l, size_t m, const std::vector<ClipInfo>& clips,
+                                        uint32_t stride) {
+  std::vector<float> matrices;
+  for (const ClipInfo& clip : clips) {
+    for (uint32_t i = 0; i < StoredFrameCount(clip.frame_count, stride); ++i) {
+      const uint32_t t = clip.first_frame + std::min(i * stride, clip.frame_count - 1);
+      for (size_t s = 0; s < m; ++s) {
+        for (size_t k = 0; k < kMatrixFloats; ++k) matrices.push_back(SampleValue(l, t, s, k));
+      }
+    }
+  }
+  return matrices;
+}
+
+// The sample with what 3.0 adds: 18 frames in clips of 12, 5 and 1; level 0 every frame,
+// level 1 every other one with a mesh of its own (5 of the character's 10 vertices, two
+// triangles) and 2 influences a vertex, level 2 every third one with 1 influence on each
+// of the character's vertices; a cost each.
+LevelSetData MakeVersion3Sample() {
+  LevelSetData data = MakeSample(18);
+  data.clips = {{"walk", 0, 12, 29.97}, {"jump", 12, 5, 60.0}, {"idle", 17, 1, 24.0}};
+  data.vertex_count = 10;
+  const uint32_t strides[3] = {1, 2, 3};
+  const float costs[3] = {1.0f, 0.375f, 0.0625f};
+  for (size_t l = 0; l < 3; ++l) {
+    LevelData& level = data.levels[l];
+    level.frame_stride = strides[l];
+    level.matrices = StoredSampleMatrices(l, level.kept_joints.size(), data.clips, strides[l]);
+    level.cost = costs[l];
+  }
+  LevelData& meshed = data.levels[1];  // m = 4
+  meshed.vertices = {1, 2, 4, 7, 9};
+  meshed.triangles = {0, 1, 2, 2, 3, 4};
+  meshed.influences_per_vertex = 2;
+  meshed.influence_slots = {0, 1, 1, 2, 3, 0, 2, 3, 1, 1};
+  meshed.influence_weights = {0.75f, 0.25f, 1.0f, 0.0f, 0.5f, 0.5f, 0.125f, 0.875f, 0.5f, 0.5f};
+  LevelData& coarse = data.levels[2];  // m = 1: every vertex on the root
+  coarse.influences_per_vertex = 1;
+  coarse.influence_slots.assign(data.vertex_count, 0);
+  coarse.influence_weights.assign(data.vertex_count, 1.0f);
   return data;
 }
 
@@ -255,7 +302,8 @@ TEST(LevelFormat, RoundTripOfOneJointOneFrameOneLevel) {
   data.fps = 60;
   data.joint_names = {"j"};
   data.parents = {-1};
-  data.levels.push_back({{0}, {0}, {}, {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0}});
+  data.levels.push_back(
+      {.kept_joints = {0}, .joint_map = {0}, .matrices = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0}});
   const AlignedBytes bytes = Encode(data);
   StatusOr<LevelSetView> view = DecodeLevelSet(bytes.bytes());
   ASSERT_TRUE(view.ok()) << view.status().ToString();
@@ -437,7 +485,7 @@ TEST(ValidateLevelSet, RejectsEachInvalidField) {
        "kept joint 3"},
       {"removed joint not on parent's slot", [](LevelSetData& d) { d.levels[1].joint_map[5] = 2; },
        "removed joint 5"},
-      {"matrix count", [](LevelSetData& d) { d.levels[0].matrices.pop_back(); }, "T x m x 12"},
+      {"matrix count", [](LevelSetData& d) { d.levels[0].matrices.pop_back(); }, "T' x m x 12"},
       {"NaN matrix", [nan](LevelSetData& d) { d.levels[1].matrices[30] = nan; }, "not finite"},
       {"infinite matrix", [inf](LevelSetData& d) { d.levels[1].matrices[30] = inf; }, "not finite"},
       {"NaN figure", [nan](LevelSetData& d) { d.levels[1].figures.mean_E = nan; }, "mean_E"},
@@ -558,17 +606,17 @@ TEST(DecodeLevelSet, RejectsBadMagic) {
 
 TEST(DecodeLevelSet, RefusesOtherMajorVersionsNamingTheVersionFoundAndTheOnesItReads) {
   internal::WriterOptions options;
-  options.major_version = 3;
+  options.major_version = 4;
   options.minor_version = 1;
   const LevelSetData sample = MakeSample();
   const AlignedBytes bytes =
       AlignedBytes::CopyOf(internal::EncodeLevelSetWithOptions(RefOf(sample), options).value());
   const Status status = DecodeLevelSet(bytes.bytes()).status();
   EXPECT_EQ(status.code(), StatusCode::kUnsupported);
-  EXPECT_THAT(status.message(), HasSubstr("version 3.1 is not supported"));
-  EXPECT_THAT(status.message(), HasSubstr("reads versions 1.x and 2.x"));
+  EXPECT_THAT(status.message(), HasSubstr("version 4.1 is not supported"));
+  EXPECT_THAT(status.message(), HasSubstr("reads versions 1.x, 2.x and 3.x"));
 
-  for (const uint16_t major : {uint16_t{0}, uint16_t{4}, uint16_t{0xFFFF}}) {
+  for (const uint16_t major : {uint16_t{0}, uint16_t{5}, uint16_t{0xFFFF}}) {
     const Status other = DecodeEdited(
         bytes, [&](AlignedBytes& b) { Poke<uint16_t>(b, internal::kOffsetMajorVersion, major); });
     EXPECT_EQ(other.code(), StatusCode::kUnsupported) << major;
@@ -581,10 +629,12 @@ TEST(DecodeLevelSet, RefusesOtherMajorVersionsNamingTheVersionFoundAndTheOnesItR
 }
 
 TEST(DecodeLevelSet, RejectsTruncationAtEveryByteOffset) {
-  const AlignedBytes bytes = Encode(MakeSample(1));
-  for (size_t size = 0; size < bytes.size(); ++size) {
-    const Status status = DecodeLevelSet(bytes.bytes().first(size)).status();
-    ASSERT_EQ(status.code(), StatusCode::kDataLoss) << "prefix of " << size << " bytes";
+  for (const LevelSetData& data : {MakeSample(1), MakeVersion3Sample()}) {
+    const AlignedBytes bytes = Encode(data);
+    for (size_t size = 0; size < bytes.size(); ++size) {
+      const Status status = DecodeLevelSet(bytes.bytes().first(size)).status();
+      ASSERT_EQ(status.code(), StatusCode::kDataLoss) << "prefix of " << size << " bytes";
+    }
   }
 }
 
@@ -596,16 +646,17 @@ TEST(DecodeLevelSet, RejectsTrailingBytes) {
 }
 
 TEST(DecodeLevelSet, RejectsEveryFlippedBit) {
-  const AlignedBytes original = Encode(MakeSample(1));
-  AlignedBytes bytes = AlignedBytes::CopyOf(original.bytes());
-  for (size_t i = 0; i < bytes.size(); ++i) {
-    for (const uint8_t bit : {0x01, 0x80}) {
-      bytes.data()[i] ^= std::byte{bit};
-      ASSERT_FALSE(DecodeLevelSet(bytes.bytes()).ok()) << "byte " << i << " bit " << int{bit};
-      bytes.data()[i] ^= std::byte{bit};
+  for (const LevelSetData& data : {MakeSample(1), MakeVersion3Sample()}) {
+    AlignedBytes bytes = Encode(data);
+    for (size_t i = 0; i < bytes.size(); ++i) {
+      for (const uint8_t bit : {0x01, 0x80}) {
+        bytes.data()[i] ^= std::byte{bit};
+        ASSERT_FALSE(DecodeLevelSet(bytes.bytes()).ok()) << "byte " << i << " bit " << int{bit};
+        bytes.data()[i] ^= std::byte{bit};
+      }
     }
+    EXPECT_TRUE(DecodeLevelSet(bytes.bytes()).ok());
   }
-  EXPECT_TRUE(DecodeLevelSet(bytes.bytes()).ok());
 }
 
 TEST(DecodeLevelSet, ReportsChecksumMismatchAsDataLoss) {
@@ -618,12 +669,15 @@ TEST(DecodeLevelSet, ReportsChecksumMismatchAsDataLoss) {
 
 TEST(DecodeLevelSet, WithoutChecksumNeverFailsOtherThanByStatusOnCorruptBytes) {
   // The fuzz target's configuration, on every single-byte corruption of small files (of
-  // both versions, one with several clips): each decodes or fails cleanly (run under
-  // sanitizers to catch over-reads).
+  // every version, one with several clips, one with strides, meshes and influences): each
+  // decodes or fails cleanly (run under sanitizers to catch over-reads).
   LevelSetData clips = MakeClipSample();
   clips.levels.resize(1);
+  LevelSetData version3 = MakeVersion3Sample();
+  version3.levels.erase(version3.levels.begin());
   for (const std::string& file :
        {EncodeLevelSet(MakeSample(1)).value(), EncodeLevelSet(clips).value(),
+        EncodeLevelSet(version3).value(), test_v2::EncodeVersion2(clips),
         test_v1::EncodeVersion1(MakeSample(1))}) {
     AlignedBytes bytes = AlignedBytes::CopyOf(file);
     const DecodeOptions no_checksum{.verify_checksum = false};
@@ -637,6 +691,11 @@ TEST(DecodeLevelSet, WithoutChecksumNeverFailsOtherThanByStatusOnCorruptBytes) {
           EXPECT_TRUE(EncodeLevelSet(ToLevelSetData(*view)).ok()) << "byte " << i;
           for (uint32_t c = 0; c < view->clip_count(); ++c) {
             EXPECT_TRUE(ExtractLevelClip(*view, 0, c).ok()) << "byte " << i << " clip " << c;
+            const uint32_t frames = view->clip(c).frame_count;
+            for (const LevelView& level : view->levels()) {
+              const FrameBlend last = level.Blend(c, frames - 1, frames);
+              EXPECT_LT(last.to, level.frame_count()) << "byte " << i << " clip " << c;
+            }
           }
         }
         bytes.data()[i] = saved;
@@ -747,12 +806,22 @@ TEST(DecodeLevelSet, RejectsMisalignedBufferAndDecodesAnAlignedCopy) {
 }
 
 TEST(DecodeLevelSet, RejectsFrameCountWhoseMatrixSizeWouldOverflow) {
-  // 0xFFFFFFFF x 4 x 48 wraps in 32 bits; in 64 it does not match the section.
+  // The clips no longer cover the frames: checked before any level's size.
   const AlignedBytes bytes = Encode(MakeSample());
-  const Status status = DecodeEdited(
-      bytes, [](AlignedBytes& b) { Poke<uint32_t>(b, internal::kOffsetFrameCount, 0xFFFFFFFFu); });
+  const auto huge_frame_count = [](AlignedBytes& b) {
+    Poke<uint32_t>(b, internal::kOffsetFrameCount, 0xFFFFFFFFu);
+  };
+  const Status status = DecodeEdited(bytes, huge_frame_count);
   EXPECT_EQ(status.code(), StatusCode::kDataLoss);
-  EXPECT_THAT(status.message(), HasSubstr("T = 4294967295"));
+  EXPECT_THAT(status.message(), HasSubstr("the clips cover frames [0, 3) of 4294967295"));
+  // A 1.0 file's one clip is every frame: 0xFFFFFFFF x 6 x 48 wraps in 32 bits; in 64 it
+  // does not match the section.
+  const AlignedBytes v1 = AlignedBytes::CopyOf(test_v1::EncodeVersion1(MakeSample()));
+  const Status v1_status = DecodeEdited(v1, huge_frame_count);
+  EXPECT_EQ(v1_status.code(), StatusCode::kDataLoss);
+  EXPECT_THAT(v1_status.message(),
+              HasSubstr("level 0: the matrices section is 864 bytes; expected 1236950580960"));
+  EXPECT_THAT(v1_status.message(), HasSubstr("T = 4294967295"));
 }
 
 TEST(DecodeLevelSet, RejectsSectionCountWhoseDirectoryWouldOverflow) {
@@ -819,9 +888,12 @@ TEST(DecodeLevelSet, RejectsNonZeroPadding) {
 
 TEST(DecodeLevelSet, RejectsReservedFieldsAndUnknownFlagsOfTheCurrentMinorVersion) {
   const AlignedBytes bytes = Encode(MakeSample());
-  const Status reserved =
-      DecodeEdited(bytes, [](AlignedBytes& b) { Poke<uint32_t>(b, internal::kOffsetReserved, 1); });
-  EXPECT_THAT(reserved.message(), HasSubstr("reserved"));
+  const SampleOffsets at = OffsetsOf(bytes);
+  const Status reserved = DecodeEdited(bytes, [&](AlignedBytes& b) {
+    Poke<uint32_t>(b, at.level_table + internal::kLevelRecordSize + internal::kRecordOffsetReserved,
+                   1);
+  });
+  EXPECT_THAT(reserved.message(), HasSubstr("level 1: reserved record fields are not zero"));
   const Status flags = DecodeEdited(
       bytes, [](AlignedBytes& b) { Poke<uint32_t>(b, internal::kOffsetFlags, 1u << 5); });
   EXPECT_THAT(flags.message(), HasSubstr("unknown flag"));
@@ -873,7 +945,7 @@ TEST(DecodeLevelSet, AcceptsLaterMinorVersionAndSkipsWhatItDoesNotKnow) {
 }
 
 // ---------------------------------------------------------------------------------
-// Clips (version 2.0).
+// Clips (since version 2.0).
 
 // Where the clip table starts: directory entry 4.
 size_t ClipTableOffset(const AlignedBytes& bytes) {
@@ -895,7 +967,7 @@ TEST(Clips, RoundTripReproducesEveryClip) {
   const AlignedBytes bytes = Encode(data);
   StatusOr<LevelSetView> view = DecodeLevelSet(bytes.bytes());
   ASSERT_TRUE(view.ok()) << view.status().ToString();
-  EXPECT_EQ(view->major_version(), 2);
+  EXPECT_EQ(view->major_version(), kLevelFormatMajorVersion);
   ASSERT_EQ(view->clip_count(), 3u);
   ASSERT_EQ(view->clips().size(), 3u);
   EXPECT_EQ(view->clip(0).name, "walk");
@@ -967,12 +1039,12 @@ TEST(Clips, OneClipPerFrameIsAllowed) {
 // The clip table as docs/level-format.md lays it out, byte by byte.
 TEST(Clips, TableLayoutIsAsDocumented) {
   const AlignedBytes bytes = Encode(MakeClipSample());
-  EXPECT_EQ(Peek<uint16_t>(bytes, internal::kOffsetMajorVersion), 2);
+  EXPECT_EQ(Peek<uint16_t>(bytes, internal::kOffsetMajorVersion), 3);
   EXPECT_EQ(Peek<uint16_t>(bytes, internal::kOffsetMinorVersion), 0);
   EXPECT_EQ(Peek<uint32_t>(bytes, 100), 3u);   // clip_count
   EXPECT_EQ(Peek<uint32_t>(bytes, 104), 16u);  // clip_record_size
-  EXPECT_EQ(Peek<uint32_t>(bytes, 108), 0u);   // reserved
-  EXPECT_EQ(Peek<uint32_t>(bytes, internal::kOffsetSectionCount), 5u + 3u * 3u);
+  EXPECT_EQ(Peek<uint32_t>(bytes, 108), 0u);   // vertex_count: no level has a mesh
+  EXPECT_EQ(Peek<uint32_t>(bytes, internal::kOffsetSectionCount), 5u + 7u * 3u);
   EXPECT_EQ(Peek<double>(bytes, internal::kOffsetFps), 29.97);
   const size_t entry = internal::kHeaderSize + 4 * internal::kDirectoryEntrySize;
   EXPECT_EQ(Peek<uint32_t>(bytes, entry), 5u);  // kind: clip table
@@ -1170,7 +1242,7 @@ TEST(DecodeLevelSet, RejectsInvalidClipTables) {
        "clip count 4294967295"},
       {"clip record size of a later minor version",
        [](AlignedBytes& b) { Poke<uint32_t>(b, internal::kOffsetClipRecordSize, 24); },
-       "clip record size 24 is invalid for version 2.0"},
+       "clip record size 24 is invalid for version 3.0"},
       {"clip record size that would wrap",
        [](AlignedBytes& b) {
          Poke<uint16_t>(b, internal::kOffsetMinorVersion, 1);
@@ -1216,15 +1288,15 @@ TEST(Version1, DecodesAsOneUnnamedClipOfEveryFrame) {
   }
 }
 
-TEST(Version1, ReencodesAsTheVersion2FileOfTheSameContent) {
+TEST(Version1, ReencodesAsTheCurrentVersionFileOfTheSameContent) {
   for (const LevelSetData& data : {MakeSample(), MakeRigidSample()}) {
     const AlignedBytes v1 = AlignedBytes::CopyOf(test_v1::EncodeVersion1(data));
     const LevelSetView view = DecodeLevelSet(v1.bytes()).value();
     const std::string again = EncodeLevelSet(ToLevelSetData(view)).value();
-    const std::string v2 = EncodeLevelSet(data).value();
-    ASSERT_EQ(again.size(), v2.size());
-    EXPECT_EQ(std::memcmp(again.data(), v2.data(), v2.size()), 0);
-    // What the server streams from a 1.0 file is a 2.0 file.
+    const std::string current = EncodeLevelSet(data).value();
+    ASSERT_EQ(again.size(), current.size());
+    EXPECT_EQ(std::memcmp(again.data(), current.data(), current.size()), 0);
+    // What the server streams from a 1.0 file is a file of the current version.
     const AlignedBytes one = AlignedBytes::CopyOf(ExtractLevel(view, 1).value());
     const LevelSetView single = DecodeLevelSet(one.bytes()).value();
     EXPECT_EQ(single.major_version(), kLevelFormatMajorVersion);
@@ -1262,6 +1334,472 @@ TEST(Version1, KeepsItsOwnRules) {
   for (size_t size = 0; size < v1.size(); ++size) {
     ASSERT_EQ(DecodeLevelSet(v1.bytes().first(size)).status().code(), StatusCode::kDataLoss)
         << size;
+  }
+}
+
+// ---------------------------------------------------------------------------------
+// Version 2.0 files (levels of every frame, without mesh, influences or cost) still read.
+
+TEST(Version2, DecodesWithEveryFrameStoredAndNothingOfVersion3) {
+  const LevelSetData data = MakeClipSample();
+  const AlignedBytes bytes = AlignedBytes::CopyOf(test_v2::EncodeVersion2(data));
+  StatusOr<LevelSetView> view = DecodeLevelSet(bytes.bytes());
+  ASSERT_TRUE(view.ok()) << view.status().ToString();
+  EXPECT_EQ(view->major_version(), 2);
+  EXPECT_EQ(view->minor_version(), 0);
+  EXPECT_EQ(view->vertex_count(), 0u);
+  ASSERT_EQ(view->clip_count(), 3u);
+  EXPECT_EQ(view->clip(1).name, "jump");
+  for (const LevelView& level : view->levels()) {
+    EXPECT_EQ(level.frame_stride(), 1u);
+    EXPECT_EQ(level.frame_count(), 6u);
+    EXPECT_FALSE(level.has_own_mesh());
+    EXPECT_TRUE(level.triangles().empty());
+    EXPECT_EQ(level.influences_per_vertex(), 0u);
+    EXPECT_TRUE(level.influence_slots().empty());
+    EXPECT_TRUE(level.influence_weights().empty());
+    EXPECT_EQ(level.cost(), 0.0f);
+    EXPECT_EQ(level.clip_first_stored(2), 5u);
+    const FrameBlend blend = level.Blend(1, 1, 2);
+    EXPECT_EQ(blend.from, 4u);
+    EXPECT_EQ(blend.to, 4u);
+    EXPECT_EQ(blend.fraction, 0.0f);
+  }
+  EXPECT_EQ(view->level(1).matrix(4, 3)[11], SampleValue(1, 4, 3, 11));
+  EXPECT_EQ(ToLevelSetData(*view), data);
+}
+
+TEST(Version2, ReencodesAsTheCurrentVersionFileOfTheSameContent) {
+  for (const LevelSetData& data : {MakeClipSample(), MakeSample(), MakeRigidSample()}) {
+    const AlignedBytes v2 = AlignedBytes::CopyOf(test_v2::EncodeVersion2(data));
+    const LevelSetView view = DecodeLevelSet(v2.bytes()).value();
+    const std::string again = EncodeLevelSet(ToLevelSetData(view)).value();
+    const std::string current = EncodeLevelSet(data).value();
+    ASSERT_EQ(again.size(), current.size());
+    EXPECT_EQ(std::memcmp(again.data(), current.data(), current.size()), 0);
+    const AlignedBytes one = AlignedBytes::CopyOf(ExtractLevelClip(view, 1, 0).value());
+    const LevelSetView single = DecodeLevelSet(one.bytes()).value();
+    EXPECT_EQ(single.major_version(), kLevelFormatMajorVersion);
+    EXPECT_EQ(single.level(0).frame_count(), view.clip(0).frame_count);
+  }
+}
+
+TEST(Version2, KeepsItsOwnRules) {
+  const LevelSetData data = MakeClipSample();
+  // 2.0: offset 108 is reserved, there are 5 + 3L sections and records of 32 bytes.
+  test_v2::Version2Options reserved;
+  reserved.reserved = 3;
+  Status status =
+      DecodeLevelSet(AlignedBytes::CopyOf(test_v2::EncodeVersion2(data, reserved)).bytes())
+          .status();
+  EXPECT_EQ(status.code(), StatusCode::kDataLoss);
+  EXPECT_THAT(status.message(), HasSubstr("reserved header fields"));
+  test_v2::Version2Options extra;
+  extra.trailing_section = "a section 2.0 does not have";
+  status =
+      DecodeLevelSet(AlignedBytes::CopyOf(test_v2::EncodeVersion2(data, extra)).bytes()).status();
+  EXPECT_THAT(status.message(), HasSubstr("section count 15 for 3 levels (expected 14)"));
+  const AlignedBytes bytes = AlignedBytes::CopyOf(test_v2::EncodeVersion2(data));
+  status = DecodeEdited(bytes, [](AlignedBytes& b) {
+    Poke<uint32_t>(b, internal::kOffsetLevelRecordSize, internal::kLevelRecordSize);
+  });
+  EXPECT_THAT(status.message(), HasSubstr("level record size 48 is invalid for version 2.0"));
+  // A later 2.x minor version may fill them; this build skips what it does not know.
+  test_v2::Version2Options later = extra;
+  later.minor_version = 1;
+  later.reserved = 3;
+  const AlignedBytes later_bytes = AlignedBytes::CopyOf(test_v2::EncodeVersion2(data, later));
+  StatusOr<LevelSetView> view = DecodeLevelSet(later_bytes.bytes());
+  ASSERT_TRUE(view.ok()) << view.status().ToString();
+  EXPECT_EQ(view->minor_version(), 1);
+  EXPECT_EQ(view->vertex_count(), 0u);  // offset 108 is not 2.x's vertex count
+  EXPECT_EQ(ToLevelSetData(*view), data);
+  for (size_t size = 0; size < bytes.size(); ++size) {
+    ASSERT_EQ(DecodeLevelSet(bytes.bytes().first(size)).status().code(), StatusCode::kDataLoss)
+        << size;
+  }
+}
+
+// ---------------------------------------------------------------------------------
+// Version 3.0: pose rate, the levels' own meshes and influences, cost.
+
+TEST(Version3, RoundTripReproducesStridesMeshesInfluencesAndCosts) {
+  const LevelSetData data = MakeVersion3Sample();
+  ASSERT_TRUE(ValidateLevelSet(data).ok()) << ValidateLevelSet(data).ToString();
+  const AlignedBytes bytes = Encode(data);
+  StatusOr<LevelSetView> view = DecodeLevelSet(bytes.bytes());
+  ASSERT_TRUE(view.ok()) << view.status().ToString();
+  EXPECT_EQ(view->major_version(), 3);
+  EXPECT_EQ(view->frame_count(), 18u);
+  EXPECT_EQ(view->vertex_count(), 10u);
+  // T' = 12 + 5 + 1 at stride 1; 7 + 3 + 1 at 2; 5 + 3 + 1 at 3.
+  const uint32_t stored[3] = {18, 11, 9};
+  const uint32_t second_clip[3] = {12, 7, 5};
+  for (uint32_t l = 0; l < 3; ++l) {
+    const LevelView& level = view->level(l);
+    EXPECT_EQ(level.frame_stride(), l + 1);
+    EXPECT_EQ(level.frame_count(), stored[l]);
+    EXPECT_EQ(level.matrices().size(), stored[l] * level.kept_count() * kMatrixFloats);
+    EXPECT_EQ(level.clip_first_stored(0), 0u);
+    EXPECT_EQ(level.clip_first_stored(1), second_clip[l]);
+    EXPECT_EQ(level.clip_first_stored(2), stored[l] - 1);
+    EXPECT_EQ(level.cost(), data.levels[l].cost);
+  }
+  const LevelView& meshed = view->level(1);
+  EXPECT_TRUE(meshed.has_own_mesh());
+  EXPECT_THAT(meshed.vertices(), ::testing::ElementsAre(1, 2, 4, 7, 9));
+  EXPECT_THAT(meshed.triangles(), ::testing::ElementsAre(0, 1, 2, 2, 3, 4));
+  EXPECT_EQ(meshed.influences_per_vertex(), 2u);
+  EXPECT_THAT(meshed.influence_slots(),
+              ::testing::ElementsAreArray(data.levels[1].influence_slots));
+  ExpectBitwiseEqual(meshed.influence_weights(), data.levels[1].influence_weights);
+  // Stored frame 1 of clip "walk" at stride 2 is its frame 2.
+  EXPECT_EQ(meshed.matrix(1, 3)[5], SampleValue(1, 2, 3, 5));
+  const LevelView& coarse = view->level(2);
+  EXPECT_FALSE(coarse.has_own_mesh());
+  EXPECT_EQ(coarse.influence_slots().size(), 10u);
+  EXPECT_FALSE(view->level(0).has_own_mesh());
+  EXPECT_EQ(view->level(0).influences_per_vertex(), 0u);
+  EXPECT_EQ(ToLevelSetData(*view), data);
+}
+
+TEST(Version3, ReencodingADecodedFileReproducesItByteForByte) {
+  const LevelSetData data = MakeVersion3Sample();
+  const AlignedBytes bytes = Encode(data);
+  const LevelSetView view = DecodeLevelSet(bytes.bytes()).value();
+  const std::string again = EncodeLevelSet(ToLevelSetData(view)).value();
+  ASSERT_EQ(again.size(), bytes.size());
+  EXPECT_EQ(std::memcmp(again.data(), bytes.data(), bytes.size()), 0);
+  EXPECT_EQ(EncodedLevelSetSize(data), bytes.size());
+  const std::string from_views = EncodeLevelSet(RefOf(data)).value();
+  EXPECT_EQ(std::memcmp(from_views.data(), bytes.data(), bytes.size()), 0);
+  AlignedBytes out(bytes.size());
+  ASSERT_EQ(EncodeLevelSetInto(data, out.mutable_bytes()).value(), bytes.size());
+  EXPECT_EQ(std::memcmp(out.data(), bytes.data(), bytes.size()), 0);
+}
+
+// The header, level records and per-level sections as docs/level-format.md lays them out.
+TEST(Version3, LayoutIsAsDocumented) {
+  const LevelSetData data = MakeVersion3Sample();
+  const AlignedBytes bytes = Encode(data);
+  EXPECT_EQ(Peek<uint16_t>(bytes, 8), 3);
+  EXPECT_EQ(Peek<uint16_t>(bytes, 10), 0);
+  EXPECT_EQ(Peek<uint32_t>(bytes, 96), 48u);   // level_record_size
+  EXPECT_EQ(Peek<uint32_t>(bytes, 108), 10u);  // vertex_count
+  EXPECT_EQ(Peek<uint32_t>(bytes, 44), 5u + 7u * 3u);
+  const size_t table = OffsetsOf(bytes).level_table;
+  const size_t record = table + 48;                    // level 1
+  EXPECT_EQ(Peek<uint32_t>(bytes, record + 0), 4u);    // kept_count
+  EXPECT_EQ(Peek<float>(bytes, record + 4), 0.5f);     // max_vertex_error_pct
+  EXPECT_EQ(Peek<uint32_t>(bytes, record + 24), 2u);   // frame_stride
+  EXPECT_EQ(Peek<uint32_t>(bytes, record + 28), 2u);   // influences_per_vertex
+  EXPECT_EQ(Peek<uint32_t>(bytes, record + 32), 5u);   // vertex_count
+  EXPECT_EQ(Peek<uint32_t>(bytes, record + 36), 2u);   // triangle_count
+  EXPECT_EQ(Peek<float>(bytes, record + 40), 0.375f);  // cost
+  EXPECT_EQ(Peek<uint32_t>(bytes, record + 44), 0u);   // reserved
+  // Directory entries 5 + 7l .. 11 + 7l: kinds 16 to 22 of level l, sized as documented;
+  // the empty ones are there too, packed like the others.
+  const uint64_t sizes[3][7] = {{2 * 6, 2 * 6, 48 * 18 * 6, 0, 0, 0, 0},
+                                {2 * 4, 2 * 6, 48 * 11 * 4, 4 * 5, 4 * 6, 2 * 10, 4 * 10},
+                                {2 * 1, 2 * 6, 48 * 9 * 1, 0, 0, 2 * 10, 4 * 10}};
+  for (uint32_t l = 0; l < 3; ++l) {
+    for (uint32_t i = 0; i < 7; ++i) {
+      const size_t entry = internal::kHeaderSize + (5 + 7 * l + i) * internal::kDirectoryEntrySize;
+      const size_t previous = entry - internal::kDirectoryEntrySize;
+      EXPECT_EQ(Peek<uint32_t>(bytes, entry), 16 + i) << l << " " << i;
+      EXPECT_EQ(Peek<uint32_t>(bytes, entry + 4), l) << l << " " << i;
+      EXPECT_EQ(Peek<uint64_t>(bytes, entry + 16), sizes[l][i]) << l << " " << i;
+      const uint64_t end =
+          Peek<uint64_t>(bytes, previous + 8) + Peek<uint64_t>(bytes, previous + 16);
+      EXPECT_EQ(Peek<uint64_t>(bytes, entry + 8), (end + 15) / 16 * 16) << l << " " << i;
+    }
+  }
+}
+
+// A clip of 12 frames at stride 3 stores frames 0, 3, 6, 9 and 11.
+TEST(Version3, BlendLocatesEachFrameBetweenTwoStoredOnes) {
+  const AlignedBytes bytes = Encode(MakeVersion3Sample());
+  const LevelSetView view = DecodeLevelSet(bytes.bytes()).value();
+  const LevelView& level = view.level(2);
+  struct Expected {
+    uint32_t from, to;
+    float fraction;
+  };
+  const Expected walk[12] = {{0, 0, 0},        {0, 1, 1 / 3.0f}, {0, 1, 2 / 3.0f}, {1, 1, 0},
+                             {1, 2, 1 / 3.0f}, {1, 2, 2 / 3.0f}, {2, 2, 0},        {2, 3, 1 / 3.0f},
+                             {2, 3, 2 / 3.0f}, {3, 3, 0},        {3, 4, 0.5f},     {4, 4, 0}};
+  for (uint32_t t = 0; t < 12; ++t) {
+    const FrameBlend blend = level.Blend(0, t, 12);
+    EXPECT_EQ(blend.from, walk[t].from) << t;
+    EXPECT_EQ(blend.to, walk[t].to) << t;
+    EXPECT_FLOAT_EQ(blend.fraction, walk[t].fraction) << t;
+  }
+  // "jump", 5 frames from stored frame 5: frames 0, 3 and 4.
+  const Expected jump[5] = {{5, 5, 0}, {5, 6, 1 / 3.0f}, {5, 6, 2 / 3.0f}, {6, 6, 0}, {7, 7, 0}};
+  for (uint32_t t = 0; t < 5; ++t) {
+    const FrameBlend blend = level.Blend(1, t, 5);
+    EXPECT_EQ(blend.from, jump[t].from) << t;
+    EXPECT_EQ(blend.to, jump[t].to) << t;
+    EXPECT_FLOAT_EQ(blend.fraction, jump[t].fraction) << t;
+  }
+  const FrameBlend idle = level.Blend(2, 0, 1);
+  EXPECT_EQ(idle.from, 8u);
+  EXPECT_EQ(idle.to, 8u);
+  EXPECT_EQ(idle.fraction, 0.0f);
+  // At stride 1 every frame is stored.
+  for (uint32_t t = 0; t < 5; ++t) {
+    const FrameBlend blend = view.level(0).Blend(1, t, 5);
+    EXPECT_EQ(blend.from, 12 + t);
+    EXPECT_EQ(blend.to, 12 + t);
+    EXPECT_EQ(blend.fraction, 0.0f);
+  }
+  // The sample's values are linear in the frame: a blend of the stored frames gives back
+  // every frame of every clip at every stride.
+  for (uint32_t l = 0; l < view.level_count(); ++l) {
+    const LevelView& each = view.level(l);
+    for (uint32_t c = 0; c < view.clip_count(); ++c) {
+      const ClipView& clip = view.clip(c);
+      for (uint32_t t = 0; t < clip.frame_count; ++t) {
+        const FrameBlend blend = each.Blend(c, t, clip.frame_count);
+        for (uint32_t s = 0; s < each.kept_count(); ++s) {
+          for (size_t k = 0; k < kMatrixFloats; ++k) {
+            const float value = (1 - blend.fraction) * each.matrix(blend.from, s)[k] +
+                                blend.fraction * each.matrix(blend.to, s)[k];
+            const float expected = SampleValue(l, clip.first_frame + t, s, k);
+            ASSERT_NEAR(value, expected, 1e-5f * std::abs(expected))
+                << "level " << l << " clip " << c << " frame " << t;
+          }
+        }
+      }
+    }
+  }
+}
+
+TEST(Version3, ExtractLevelKeepsTheLevelsStrideMeshInfluencesAndCost) {
+  const LevelSetData data = MakeVersion3Sample();
+  const AlignedBytes bytes = Encode(data);
+  const LevelSetView view = DecodeLevelSet(bytes.bytes()).value();
+  for (uint32_t l = 0; l < view.level_count(); ++l) {
+    const AlignedBytes one = AlignedBytes::CopyOf(ExtractLevel(view, l).value());
+    StatusOr<LevelSetView> single = DecodeLevelSet(one.bytes());
+    ASSERT_TRUE(single.ok()) << single.status().ToString();
+    LevelSetData expected = data;
+    expected.levels = {data.levels[l]};  // level 0 has no mesh: the vertex count stays
+    EXPECT_EQ(ToLevelSetData(*single), expected) << "level " << l;
+  }
+}
+
+TEST(Version3, ExtractLevelClipHoldsTheClipsStoredFramesOnly) {
+  const LevelSetData data = MakeVersion3Sample();
+  const AlignedBytes bytes = Encode(data);
+  const LevelSetView view = DecodeLevelSet(bytes.bytes()).value();
+  for (uint32_t l = 0; l < view.level_count(); ++l) {
+    const LevelData& source = data.levels[l];
+    for (uint32_t c = 0; c < view.clip_count(); ++c) {
+      StatusOr<std::string> extracted = ExtractLevelClip(view, l, c);
+      ASSERT_TRUE(extracted.ok()) << extracted.status().ToString();
+      const AlignedBytes file = AlignedBytes::CopyOf(*extracted);
+      StatusOr<LevelSetView> single = DecodeLevelSet(file.bytes());
+      ASSERT_TRUE(single.ok()) << single.status().ToString();
+      const ClipInfo& clip = data.clips[c];
+      EXPECT_EQ(single->frame_count(), clip.frame_count);
+      EXPECT_EQ(single->vertex_count(), data.vertex_count);
+      ASSERT_EQ(single->clip_count(), 1u);
+      EXPECT_EQ(single->clip(0).first_frame, 0u);
+      LevelData expected = source;
+      expected.matrices =
+          StoredSampleMatrices(l, source.kept_joints.size(), {clip}, source.frame_stride);
+      EXPECT_EQ(ToLevelSetData(*single).levels[0], expected) << "level " << l << " clip " << c;
+      const LevelView& level = single->level(0);
+      EXPECT_EQ(level.frame_count(), StoredFrameCount(clip.frame_count, source.frame_stride));
+      EXPECT_EQ(level.clip_first_stored(0), 0u);
+      // The one clip's blends are the set's, less the clip's first stored frame.
+      for (uint32_t t = 0; t < clip.frame_count; ++t) {
+        const FrameBlend in_set = view.level(l).Blend(c, t, clip.frame_count);
+        const FrameBlend alone = level.Blend(0, t, clip.frame_count);
+        const uint32_t first = view.level(l).clip_first_stored(c);
+        EXPECT_EQ(alone.from + first, in_set.from);
+        EXPECT_EQ(alone.to + first, in_set.to);
+        EXPECT_EQ(alone.fraction, in_set.fraction);
+      }
+      const std::string again = ExtractLevelClip(*single, 0, 0).value();
+      ASSERT_EQ(again.size(), file.size());
+      EXPECT_EQ(std::memcmp(again.data(), file.data(), file.size()), 0);
+    }
+  }
+}
+
+TEST(ValidateLevelSet, RejectsEachInvalidVersion3Field) {
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const float inf = std::numeric_limits<float>::infinity();
+  const InvalidCase cases[] = {
+      {"stride 0", [](LevelSetData& d) { d.levels[1].frame_stride = 0; },
+       "level 1: frame stride 0 is out of [1, 16]"},
+      {"stride 17", [](LevelSetData& d) { d.levels[2].frame_stride = 17; },
+       "level 2: frame stride 17 is out of [1, 16]"},
+      {"matrices of another stride", [](LevelSetData& d) { d.levels[1].frame_stride = 3; },
+       "level 1 has 528 matrix floats; T' x m x 12 = 432 (T' = 9 stored frames at frame "
+       "stride 3)"},
+      {"vertices not ascending", [](LevelSetData& d) { d.levels[1].vertices[2] = 2; },
+       "level 1: its vertices are not strictly ascending at 2 (2 then 2)"},
+      {"vertex out of range", [](LevelSetData& d) { d.levels[1].vertices[4] = 10; },
+       "level 1: vertex 10 is out of range (vertex_count = 10)"},
+      {"mesh without the character's vertex count",
+       [](LevelSetData& d) {
+         d.vertex_count = 0;
+         d.levels[2].influences_per_vertex = 0;
+         d.levels[2].influence_slots.clear();
+         d.levels[2].influence_weights.clear();
+       },
+       "level 1 has a mesh of its own but the level set's vertex_count is 0"},
+      {"vertices without triangles", [](LevelSetData& d) { d.levels[1].triangles.clear(); },
+       "level 1 has 5 vertices of its own and 0 triangle indices (both or neither expected)"},
+      {"triangles without vertices",
+       [](LevelSetData& d) {
+         d.levels[0].triangles = {0, 1, 2};
+       },
+       "level 0 has 0 vertices of its own and 3 triangle indices"},
+      {"triangle indices not in threes", [](LevelSetData& d) { d.levels[1].triangles.pop_back(); },
+       "level 1 has 5 triangle indices, not a multiple of 3"},
+      {"triangle corner out of range", [](LevelSetData& d) { d.levels[1].triangles[4] = 5; },
+       "level 1: triangle 1 corner 1 is vertex 5 of the level's 5"},
+      {"influences per vertex 9", [](LevelSetData& d) { d.levels[1].influences_per_vertex = 9; },
+       "level 1: influences_per_vertex 9 is out of [0, 8]"},
+      {"influences of k 0", [](LevelSetData& d) { d.levels[0].influence_slots = {0}; },
+       "level 0 has 1 influence slots and 0 weights but influences_per_vertex 0"},
+      {"influence count", [](LevelSetData& d) { d.levels[1].influence_weights.pop_back(); },
+       "level 1 has 10 influence slots and 9 weights; V x k = 10 (V = 5, k = 2)"},
+      {"influences over the character's vertices",
+       [](LevelSetData& d) { d.levels[2].influence_slots.pop_back(); },
+       "level 2 has 9 influence slots and 10 weights; V x k = 10 (V = 10, k = 1)"},
+      {"influences without vertices",
+       [](LevelSetData& d) {
+         d.vertex_count = 0;
+         d.levels[1] = MakeLevel(1, {0, 1, 3, 4}, 18);
+         d.levels[2].influence_slots.clear();
+         d.levels[2].influence_weights.clear();
+       },
+       "level 2 has influences but no vertices (no mesh of its own and the level set's "
+       "vertex_count is 0)"},
+      {"influence slot out of range", [](LevelSetData& d) { d.levels[1].influence_slots[7] = 4; },
+       "level 1: influence 1 of vertex 3 is on slot 4 (m = 4)"},
+      {"NaN weight", [nan](LevelSetData& d) { d.levels[1].influence_weights[3] = nan; },
+       "level 1: influence 1 of vertex 1 has weight nan"},
+      {"negative weight",
+       [](LevelSetData& d) {
+         d.levels[1].influence_weights[2] = 1.5f;
+         d.levels[1].influence_weights[3] = -0.5f;
+       },
+       "level 1: influence 1 of vertex 1 has weight -0.5 (finite and >= 0 expected)"},
+      {"weights not summing to 1",
+       [](LevelSetData& d) { d.levels[2].influence_weights[6] = 0.99f; },
+       "level 2: the influence weights of vertex 6 sum to 0.99"},
+      {"NaN cost", [nan](LevelSetData& d) { d.levels[1].cost = nan; }, "level 1: cost is nan"},
+      {"negative cost", [](LevelSetData& d) { d.levels[0].cost = -1; },
+       "level 0: cost is -1 (finite and >= 0 expected)"},
+      {"infinite cost", [inf](LevelSetData& d) { d.levels[2].cost = inf; }, "level 2: cost is inf"},
+  };
+  for (const InvalidCase& c : cases) {
+    LevelSetData data = MakeVersion3Sample();
+    c.edit(data);
+    const Status status = ValidateLevelSet(data);
+    EXPECT_EQ(status.code(), StatusCode::kInvalidArgument) << c.name;
+    EXPECT_THAT(status.message(), HasSubstr(c.message)) << c.name;
+    EXPECT_EQ(EncodeLevelSet(data).status().message(), status.message()) << c.name;
+    EXPECT_EQ(EncodeLevelSet(RefOf(data)).status().message(), status.message()) << c.name;
+    AlignedBytes out(EncodedLevelSetSize(data) + 16);
+    EXPECT_EQ(EncodeLevelSetInto(data, out.mutable_bytes()).status().message(), status.message())
+        << c.name;
+  }
+}
+
+TEST(ValidateLevelSet, AcceptsVersion3EdgeCases) {
+  LevelSetData data = MakeVersion3Sample();
+  data.levels[1].influence_weights[0] = 0.7505f;  // the weights of vertex 0 sum to 1.0005
+  data.levels[0].frame_stride = kMaxFrameStride;
+  data.levels[0].matrices =
+      StoredSampleMatrices(0, data.levels[0].kept_joints.size(), data.clips, kMaxFrameStride);
+  data.levels[2].cost = 0;
+  data.vertex_count = 0xFFFFFFFFu;  // vertex ids are u32; influences cover p vertices
+  data.levels[2].influences_per_vertex = 0;
+  data.levels[2].influence_slots.clear();
+  data.levels[2].influence_weights.clear();
+  EXPECT_TRUE(ValidateLevelSet(data).ok()) << ValidateLevelSet(data).ToString();
+  // A character's vertex count without any mesh or influences (a level extracted from a
+  // set whose other levels have them) is kept as is.
+  LevelSetData plain = MakeSample();
+  plain.vertex_count = 7;
+  const AlignedBytes bytes = Encode(plain);
+  EXPECT_EQ(DecodeLevelSet(bytes.bytes()).value().vertex_count(), 7u);
+}
+
+TEST(DecodeLevelSet, RejectsInvalidVersion3Levels) {
+  const AlignedBytes bytes = Encode(MakeVersion3Sample());
+  const LevelSetView view = DecodeLevelSet(bytes.bytes()).value();
+  const size_t record = OffsetsOf(bytes).level_table + internal::kLevelRecordSize;  // level 1
+  const size_t vertices = OffsetIn(bytes, view.level(1).vertices().data());
+  const size_t triangles = OffsetIn(bytes, view.level(1).triangles().data());
+  const size_t slots = OffsetIn(bytes, view.level(1).influence_slots().data());
+  const size_t weights = OffsetIn(bytes, view.level(2).influence_weights().data());
+  struct Case {
+    const char* name;
+    std::function<void(AlignedBytes&)> edit;
+    const char* message;
+  };
+  const Case cases[] = {
+      {"stride 0", [&](AlignedBytes& b) { Poke<uint32_t>(b, record + 24, 0); },
+       "level 1: frame stride 0 is out of [1, 16]"},
+      {"stride 17", [&](AlignedBytes& b) { Poke<uint32_t>(b, record + 24, 17); },
+       "level 1: frame stride 17"},
+      {"another stride", [&](AlignedBytes& b) { Poke<uint32_t>(b, record + 24, 3); },
+       "level 1: the matrices section is 2112 bytes; expected 1728 for m = 4, n = 6, T' = 9 "
+       "(T = 18, frame stride 3)"},
+      {"influences per vertex 9", [&](AlignedBytes& b) { Poke<uint32_t>(b, record + 28, 9); },
+       "level 1: influences_per_vertex 9 is out of [0, 8]"},
+      {"huge influences per vertex",
+       [&](AlignedBytes& b) { Poke<uint32_t>(b, record + 28, 0xFFFFFFFFu); },
+       "influences_per_vertex 4294967295"},
+      {"influences per vertex 3", [&](AlignedBytes& b) { Poke<uint32_t>(b, record + 28, 3); },
+       "level 1: the influence slots section is 20 bytes; expected 30"},
+      {"vertex count", [&](AlignedBytes& b) { Poke<uint32_t>(b, record + 32, 4); },
+       "level 1: the vertices section is 20 bytes; expected 16"},
+      {"huge vertex count", [&](AlignedBytes& b) { Poke<uint32_t>(b, record + 32, 0xFFFFFFFFu); },
+       "level 1: the vertices section is 20 bytes; expected 17179869180"},
+      {"triangle count", [&](AlignedBytes& b) { Poke<uint32_t>(b, record + 36, 3); },
+       "level 1: the triangles section is 24 bytes; expected 36"},
+      {"character's vertex count",
+       [](AlignedBytes& b) { Poke<uint32_t>(b, internal::kOffsetVertexCount, 9); },
+       "level 2: the influence slots section is 20 bytes; expected 18"},
+      {"cost NaN",
+       [&](AlignedBytes& b) {
+         Poke<float>(b, record + 40, std::numeric_limits<float>::quiet_NaN());
+       },
+       "level 1: cost is nan"},
+      {"cost negative", [&](AlignedBytes& b) { Poke<float>(b, record + 40, -2.0f); },
+       "level 1: cost is -2"},
+      {"reserved", [&](AlignedBytes& b) { Poke<uint32_t>(b, record + 44, 1); },
+       "level 1: reserved record fields are not zero"},
+      {"vertices not ascending", [&](AlignedBytes& b) { Poke<uint32_t>(b, vertices + 4 * 3, 4); },
+       "level 1: its vertices are not strictly ascending at 3 (4 then 4)"},
+      {"vertex out of range", [&](AlignedBytes& b) { Poke<uint32_t>(b, vertices + 4 * 4, 10); },
+       "level 1: vertex 10 is out of range (vertex_count = 10)"},
+      {"triangle corner out of range",
+       [&](AlignedBytes& b) { Poke<uint32_t>(b, triangles + 4 * 5, 0xFFFFFFFFu); },
+       "level 1: triangle 1 corner 2 is vertex 4294967295 of the level's 5"},
+      {"influence slot out of range", [&](AlignedBytes& b) { Poke<uint16_t>(b, slots + 2, 4); },
+       "level 1: influence 1 of vertex 0 is on slot 4 (m = 4)"},
+      {"weight infinite",
+       [&](AlignedBytes& b) {
+         Poke<float>(b, weights + 4 * 9, std::numeric_limits<float>::infinity());
+       },
+       "level 2: influence 0 of vertex 9 has weight inf"},
+      {"weights not summing to 1", [&](AlignedBytes& b) { Poke<float>(b, weights, 0.5f); },
+       "level 2: the influence weights of vertex 0 sum to 0.5 (1 expected, within 0.001)"},
+  };
+  for (const Case& c : cases) {
+    const Status status = DecodeEdited(bytes, c.edit);
+    EXPECT_EQ(status.code(), StatusCode::kDataLoss) << c.name;
+    EXPECT_THAT(status.message(), HasSubstr(c.message)) << c.name;
   }
 }
 
