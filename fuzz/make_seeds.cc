@@ -2,8 +2,9 @@
 // directly: OUT_DIR/asset_wire_fuzz/<name> holds the worker's reply for each FILE (as
 // asset_wire_fuzz reads it: a kind byte, then the payload), and
 // OUT_DIR/level_format_fuzz/<name>.mlod a two-level bake of it (a few frames); and, whatever
-// the files, OUT_DIR/level_format_fuzz/clips.mlod (three clips) and v1_0.mlod (a version 1.0
-// file), which bakes of one clip by this version do not cover.
+// the files, OUT_DIR/level_format_fuzz/clips.mlod (three clips), levels.mlod (three clips,
+// levels with a frame stride, a mesh and influences of their own), v2_0.mlod and v1_0.mlod
+// (version 2.0 and 1.0 files), which bakes of one clip by this version do not cover.
 // Run by scripts/fuzz.sh; exits 1 when a file cannot be read or baked.
 #include <algorithm>
 #include <cstdio>
@@ -16,6 +17,7 @@
 #include "pipeline/bake.h"
 #include "proto/level_format.h"
 #include "tests/proto/level_format_v1.h"
+#include "tests/proto/level_format_v2.h"
 
 namespace {
 
@@ -50,6 +52,47 @@ motionlod::proto::LevelSetData SmallLevelSet() {
   return data;
 }
 
+// SmallLevelSet in three clips with what version 3.0 adds: level 1 stores every other
+// frame and has a mesh of its own (3 of the character's 4 vertices, one triangle) with 2
+// influences a vertex; a third level, the root alone, every third frame with 1 influence
+// on each of the character's vertices.
+motionlod::proto::LevelSetData Version3LevelSet() {
+  using namespace motionlod::proto;
+  LevelSetData data = SmallLevelSet();
+  data.clips = {{"walk", 0, 2, 30}, {"jump", 2, 2, 60}, {"idle", 4, 1, 24}};
+  data.vertex_count = 4;
+  data.levels.push_back(data.levels[1]);
+  for (uint32_t l = 1; l < 3; ++l) {
+    LevelData& level = data.levels[l];
+    if (l == 2) {
+      level.kept_joints = {0};
+      level.joint_map = ComputeJointMap(data.parents, level.kept_joints).value();
+    }
+    level.frame_stride = l + 1;
+    level.matrices.clear();
+    for (const ClipInfo& clip : data.clips) {
+      for (uint32_t i = 0; i < StoredFrameCount(clip.frame_count, level.frame_stride); ++i) {
+        const uint32_t t =
+            clip.first_frame + std::min(i * level.frame_stride, clip.frame_count - 1);
+        for (size_t s = 0; s < level.kept_joints.size(); ++s) {
+          const float k[12] = {1, 0, 0, 0.1f * t, 0, 1, 0, float(s), 0, 0, 1, 0};
+          level.matrices.insert(level.matrices.end(), k, k + 12);
+        }
+      }
+    }
+    level.cost = 1.0f / float(l + 1);
+  }
+  data.levels[1].vertices = {0, 2, 3};
+  data.levels[1].triangles = {0, 1, 2};
+  data.levels[1].influences_per_vertex = 2;
+  data.levels[1].influence_slots = {0, 1, 1, 0, 0, 1};
+  data.levels[1].influence_weights = {0.5f, 0.5f, 1, 0, 0.25f, 0.75f};
+  data.levels[2].influences_per_vertex = 1;
+  data.levels[2].influence_slots.assign(data.vertex_count, 0);
+  data.levels[2].influence_weights.assign(data.vertex_count, 1.0f);
+  return data;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -65,6 +108,10 @@ int main(int argc, char** argv) {
     clips.clips = {{"walk", 0, 2, 30}, {"jump", 2, 2, 60}, {"idle", 4, 1, 24}};
     const auto encoded = proto::EncodeLevelSet(clips);
     if (!encoded.ok() || !Write(out / "level_format_fuzz" / "clips.mlod", *encoded)) status = 1;
+    const auto levels = proto::EncodeLevelSet(Version3LevelSet());
+    if (!levels.ok() || !Write(out / "level_format_fuzz" / "levels.mlod", *levels)) status = 1;
+    const std::string v2 = proto::test_v2::EncodeVersion2(clips);
+    if (!Write(out / "level_format_fuzz" / "v2_0.mlod", v2)) status = 1;
     const std::string v1 = proto::test_v1::EncodeVersion1(SmallLevelSet());
     if (!Write(out / "level_format_fuzz" / "v1_0.mlod", v1)) status = 1;
   }

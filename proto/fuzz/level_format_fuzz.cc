@@ -1,6 +1,7 @@
 // libFuzzer target for the level-set decoder: any input must decode or fail with a
 // Status, never crash, over-read or trip a sanitizer; what decodes must re-encode to
-// the same bytes and extract (by level, and by level and clip) to files that decode again.
+// the same bytes and extract (by level, and by level and clip) to files that decode again,
+// and every frame of every clip must blend between stored frames of its own clip.
 #include <algorithm>
 #include <cstddef>
 #include <cstdint>
@@ -33,6 +34,12 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     for (const float value : level.matrices()) sum += value;
     for (uint32_t j = 0; j < view->joint_count(); ++j)
       Check(level.joint_map()[j] < level.kept_count());
+    Check(level.frame_stride() >= 1 && level.frame_stride() <= kMaxFrameStride);
+    for (const uint32_t vertex : level.vertices()) Check(vertex < view->vertex_count());
+    for (const uint32_t corner : level.triangles()) Check(corner < level.vertices().size());
+    for (const uint16_t slot : level.influence_slots()) Check(slot < level.kept_count());
+    for (const float weight : level.influence_weights()) sum += weight;
+    Check(level.influence_slots().size() == level.influence_weights().size());
   }
   (void)sum;
   // The clips, one at least (a 1.x file: one unnamed clip), cover the frames in order.
@@ -45,6 +52,19 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     next_frame += clip.frame_count;
   }
   Check(next_frame == view->frame_count());
+  for (const LevelView& level : view->levels()) {
+    for (uint32_t c = 0; c < view->clip_count(); ++c) {
+      const uint32_t frames = view->clip(c).frame_count;
+      const uint32_t first = level.clip_first_stored(c);
+      const uint32_t end = first + StoredFrameCount(frames, level.frame_stride());
+      Check(end <= level.frame_count());
+      for (uint32_t t = 0; t < frames; ++t) {
+        const FrameBlend blend = level.Blend(c, t, frames);
+        Check(first <= blend.from && blend.from <= blend.to && blend.to < end);
+        Check(blend.fraction >= 0 && blend.fraction < 1);
+      }
+    }
+  }
 
   const auto reencoded = EncodeLevelSet(ToLevelSetData(*view));
   Check(reencoded.ok());
@@ -66,7 +86,9 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       const AlignedBytes clip_copy = AlignedBytes::CopyOf(*clip);
       const auto single = DecodeLevelSet(clip_copy.bytes());
       Check(single.ok() && single->clip_count() == 1 &&
-            single->frame_count() == view->clip(c).frame_count);
+            single->frame_count() == view->clip(c).frame_count &&
+            single->level(0).frame_count() ==
+                StoredFrameCount(view->clip(c).frame_count, view->level(l).frame_stride()));
     }
   }
   return 0;
