@@ -67,7 +67,11 @@ int Main(int argc, char** argv) {
     Check(ranking.status(), "ranking");
     const core::Character& character = *inputs->character;
     const auto start = std::chrono::steady_clock::now();
-    auto ladder = pipeline::CostLadderJob{*prepared, &inputs->motion, &*ranking}.Run(pool);
+    pipeline::CostLadderJob job;
+    job.prepared = *prepared;
+    job.motion = &inputs->motion;
+    job.ranking = &*ranking;
+    auto ladder = job.Run(pool);
     Check(ladder.status(), "ladder");
     const double seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

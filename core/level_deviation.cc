@@ -12,6 +12,9 @@ namespace motionlod::core {
 namespace {
 
 constexpr int kFramesPerPiece = 8;
+// Float skinning resolves about 1e-7 of the height: a deviation under 1e-6 of it (1e-4 %)
+// is the rounding of two blends of the same matrices in another order, reported as 0.
+constexpr double kRoundingPct = 1e-4;
 
 // sum_e weights[e] K_{joints[e]} [rest; 1] over `count` influences, in float as a skinner
 // blends: the matrices first, then one transform.
@@ -162,7 +165,7 @@ StatusOr<LevelDeviation> LevelDeviationJob::Run(const PieceRunner& run) const {
       merged.frames += part.frames;
     }
     LevelDeviation clip;
-    clip.max_pct = merged.max * to_pct;
+    clip.max_pct = merged.max * to_pct < kRoundingPct ? 0 : merged.max * to_pct;
     clip.mean_pct =
         merged.frames > 0 ? merged.weighted_sum / (total_area * merged.frames) * to_pct : 0;
     clip.max_frame = merged.max_frame;

@@ -199,14 +199,13 @@ StatusOr<LevelMesh> SimplifyMeshJob::Run() const {
   }
 
   mesh.correspondence =
-      SurfaceCorrespondence(*character, mesh.vertices, mesh.triangles, mesh.bind_error);
+      SurfaceCorrespondence(*character, mesh.vertices, mesh.triangles);
   return mesh;
 }
 
 std::vector<SurfacePoint> SurfaceCorrespondence(const Character& character,
                                                 std::span<const uint32_t> vertices,
-                                                std::span<const std::array<uint32_t, 3>> triangles,
-                                                double bind_error) {
+                                                std::span<const std::array<uint32_t, 3>> triangles) {
   const RawSkin& skin = character.skin();
   const size_t p = skin.positions.size();
   constexpr uint32_t kRemoved = std::numeric_limits<uint32_t>::max();
@@ -230,7 +229,7 @@ std::vector<SurfacePoint> SurfaceCorrespondence(const Character& character,
   std::vector<uint32_t> visited(triangles.size(), 0);
   uint32_t stamp = 0;
   const float slack =
-      static_cast<float>(std::max(2 * bind_error, kCorrespondenceSlack * character.height()));
+      static_cast<float>(kCorrespondenceSlack * character.height());
   auto weight_difference = [&](uint32_t v, const std::array<uint32_t, 3>& corners,
                                const std::array<float, 3>& w) {
     // sum_j |w_vj - sum_c w_c w_{corner c, j}|: every joint of the vertex or a corner.

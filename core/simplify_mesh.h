@@ -58,12 +58,11 @@ struct SimplifyMeshJob {
 };
 
 // LevelMesh::correspondence for a level mesh of `character` given by its vertices (original
-// ids, ascending) and triangles (indices into them), `bind_error` its simplification's
-// (length): what a reader of a level file measures a level against.
+// ids, ascending) and triangles (indices into them): from these alone, so that a reader of
+// a level file measures a level against the same points as the bake.
 std::vector<SurfacePoint> SurfaceCorrespondence(const Character& character,
                                                 std::span<const uint32_t> vertices,
-                                                std::span<const std::array<uint32_t, 3>> triangles,
-                                                double bind_error);
+                                                std::span<const std::array<uint32_t, 3>> triangles);
 
 // The character on the vertices of `mesh` only, with its triangles (the areas that weight
 // the solve are the simplified surface's): what a simplified level is solved on. Vertex s

@@ -236,7 +236,7 @@ std::optional<CharacterType> LoadType(const fs::path& path, const Options& o) {
       if (level.has_own_mesh()) {
         std::vector<std::array<uint32_t, 3>> triangles(level.triangles().size() / 3);
         std::memcpy(triangles.data(), level.triangles().data(), level.triangles().size_bytes());
-        points = core::SurfaceCorrespondence(*type.character, level.vertices(), triangles, 0);
+        points = core::SurfaceCorrespondence(*type.character, level.vertices(), triangles);
       }
       ladder.correspondence.push_back(std::move(points));
       errors.push_back(level.figures().max_vertex_error_pct);

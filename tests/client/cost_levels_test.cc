@@ -84,7 +84,7 @@ double MeasuredMaxErrorPct(const Ladder& ladder, uint32_t l) {
   if (level.has_own_mesh()) {
     std::vector<std::array<uint32_t, 3>> triangles(level.triangles().size() / 3);
     std::memcpy(triangles.data(), level.triangles().data(), level.triangles().size_bytes());
-    points = core::SurfaceCorrespondence(character, level.vertices(), triangles, 0);
+    points = core::SurfaceCorrespondence(character, level.vertices(), triangles);
   }
   const size_t p = static_cast<size_t>(character.vertex_count());
   std::vector<float> level_positions(3 * level_skin->vertex_count()), full_positions(3 * p);
@@ -95,8 +95,13 @@ double MeasuredMaxErrorPct(const Ladder& ladder, uint32_t l) {
     for (uint32_t t = 0; t < ladder.view.clip(c).frame_count; ++t) {
       EXPECT_TRUE(PlayFrame(ladder.view, level, c, t, level_palette).ok());
       EXPECT_TRUE(PlayFrame(ladder.view, full, c, t, full_palette).ok());
-      EXPECT_TRUE((SkinFrameJob{&*level_skin, level_palette, ladder.view.rigid(), level_positions, {}}.Run().ok()));
-      EXPECT_TRUE((SkinFrameJob{&*full_skin, full_palette, ladder.view.rigid(), full_positions, {}}.Run().ok()));
+      EXPECT_TRUE(
+          (SkinFrameJob{&*level_skin, level_palette, ladder.view.rigid(), level_positions, {}}
+               .Run()
+               .ok()));
+      EXPECT_TRUE((SkinFrameJob{&*full_skin, full_palette, ladder.view.rigid(), full_positions, {}}
+                       .Run()
+                       .ok()));
       for (size_t i = 0; i < p; ++i) {
         double drawn[3] = {0, 0, 0};
         for (int a = 0; a < 3; ++a) {
@@ -104,11 +109,13 @@ double MeasuredMaxErrorPct(const Ladder& ladder, uint32_t l) {
             drawn[a] = level_positions[3 * i + a];
           } else {
             for (int corner = 0; corner < 3; ++corner) {
-              drawn[a] += points[i].weights[corner] * level_positions[3 * points[i].vertices[corner] + a];
+              drawn[a] +=
+                  points[i].weights[corner] * level_positions[3 * points[i].vertices[corner] + a];
             }
           }
         }
-        const double dx = drawn[0] - full_positions[3 * i], dy = drawn[1] - full_positions[3 * i + 1],
+        const double dx = drawn[0] - full_positions[3 * i],
+                     dy = drawn[1] - full_positions[3 * i + 1],
                      dz = drawn[2] - full_positions[3 * i + 2];
         worst = std::max(worst, std::sqrt(dx * dx + dy * dy + dz * dz));
       }
@@ -141,7 +148,8 @@ void ExpectAnHonestLadder(const Ladder& ladder, const std::string& what) {
   }
   // The level chosen for a height keeps the error within the 1 px budget there.
   std::vector<double> errors;
-  for (const proto::LevelView& level : ladder.view.levels()) errors.push_back(level.figures().max_vertex_error_pct);
+  for (const proto::LevelView& level : ladder.view.levels())
+    errors.push_back(level.figures().max_vertex_error_pct);
   auto selector = LevelSelector::Create(errors);
   ASSERT_TRUE(selector.ok());
   for (double px : {800.0, 400.0, 200.0, 100.0, 50.0, 25.0, 12.0}) {
@@ -155,7 +163,8 @@ TEST(CostLevels, TheSamplesLadderIsHonestAndCheaper) {
   ExpectAnHonestLadder(ladder, "sample");
   // Far levels cut the mesh, the influences or the pose rate, not only joints.
   const proto::LevelView& coarsest = ladder.view.level(ladder.view.level_count() - 1);
-  EXPECT_TRUE(coarsest.has_own_mesh() || coarsest.influences_per_vertex() > 0 || coarsest.frame_stride() > 1);
+  EXPECT_TRUE(coarsest.has_own_mesh() || coarsest.influences_per_vertex() > 0 ||
+              coarsest.frame_stride() > 1);
   EXPECT_LT(coarsest.cost(), 0.5f);
 }
 
@@ -189,15 +198,26 @@ TEST(CostLevels, ReSolvedWeightsBeatTruncationOnRealData) {
     const auto solved = *(*prepared)->SolveLevel(level);
     for (int cap : {1, 2, 4}) {
       const auto truncated = *core::TruncateInfluences(character, level, cap);
-      const auto resolved = *core::InfluenceCapJob{prepared->get(), &level, solved.matrices, cap, 0}.Run();
-      const auto before = *core::InfluenceObjective(**prepared, level, solved.matrices, truncated, 0);
+      const auto resolved =
+          *core::InfluenceCapJob{prepared->get(), &level, solved.matrices, cap, 0}.Run();
+      const auto before =
+          *core::InfluenceObjective(**prepared, level, solved.matrices, truncated, 0);
       const auto after = *core::InfluenceObjective(**prepared, level, solved.matrices, resolved, 0);
       for (size_t i = 0; i < before.size(); ++i) {
-        ASSERT_LE(after[i], before[i] * (1 + 1e-4) + 1e-12) << kept << " joints, cap " << cap << ", vertex " << i;
+        ASSERT_LE(after[i], before[i] * (1 + 1e-4) + 1e-12)
+            << kept << " joints, cap " << cap << ", vertex " << i;
       }
       const double sum_before = std::accumulate(before.begin(), before.end(), 0.0);
       const double sum_after = std::accumulate(after.begin(), after.end(), 0.0);
-      EXPECT_LT(sum_after, sum_before) << kept << " joints, cap " << cap;
+      // At every joint both are rounding, at most 2e-10 of the height squared.
+      EXPECT_LE(sum_after, std::max(sum_before, 2e-10 * character.height() * character.height()))
+          << kept << " joints, cap " << cap;
+      // Measured on CesiumMan: 0.94 and 0.91 of truncation's at one influence (a better
+      // joint), 0.31 and 0.77 at two, 0.69 at four (at every joint four are exact).
+      const double ratio = cap == 1 ? 0.97 : cap == 2 ? 0.85 : 0.8;
+      if (sum_before > 1e-6 * character.height() * character.height()) {
+        EXPECT_LT(sum_after, ratio * sum_before) << kept << " joints, cap " << cap;
+      }
     }
   }
 }

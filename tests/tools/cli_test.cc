@@ -83,10 +83,13 @@ TEST_F(Cli, BakesTheSampleWithTheDefaultLadder) {
   EXPECT_TRUE(levels[0]["max_px_for_1px_error"].is_null() ||
               levels[0]["max_px_for_1px_error"].get<double>() > 1e4);
   for (size_t l = 1; l < levels.size(); ++l) {
-    EXPECT_LT(levels[l]["joints"].get<int>(), levels[l - 1]["joints"].get<int>());
-    for (const char* field : {"removed", "mean_E", "baseline_mean_E", "max_vertex_error_pct",
-                              "baseline_max_vertex_error_pct", "mean_vertex_error_pct",
-                              "mean_normal_error_deg", "max_px_for_1px_error"}) {
+    // Levels by cost: each cheaper than the one before, never keeping more joints.
+    EXPECT_LE(levels[l]["joints"].get<int>(), levels[l - 1]["joints"].get<int>());
+    EXPECT_LT(levels[l]["cost"].get<double>(), levels[l - 1]["cost"].get<double>());
+    for (const char* field : {"removed", "vertices", "triangles", "mean_influences", "frame_stride",
+                              "stream_bytes_per_second", "cost", "mean_E", "baseline_mean_E",
+                              "max_vertex_error_pct", "baseline_max_vertex_error_pct",
+                              "mean_vertex_error_pct", "mean_normal_error_deg", "max_px_for_1px_error"}) {
       EXPECT_TRUE(levels[l].contains(field)) << field;
     }
     EXPECT_EQ(levels[l]["removed"].size(), 23u - levels[l]["joints"].get<unsigned>());
