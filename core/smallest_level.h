@@ -1,6 +1,6 @@
-// The smallest useful level: the fewest joints of the ranking's nested levels whose
-// optimised maximum vertex error (LevelErrors::max_vertex_error_pct) stays within a bound,
-// the last rung of the default ladder. Found by bisection between a count that fails (or
+// The fewest joints of the ranking's nested levels whose optimised maximum vertex error
+// (LevelErrors::max_vertex_error_pct) stays within a bound: the skeleton of a level by cost
+// (pipeline/cost_levels.h) within its share of the budget. Found by bisection between a count that fails (or
 // the fewest a level may keep) and one that meets the bound. The error grows as joints go,
 // though not strictly, so the count found meets the bound with the one below failing.
 // Each probe solves a level on at most kProbeFrames evenly spaced frames of the motion and

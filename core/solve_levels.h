@@ -49,7 +49,14 @@
 //   level_errors.cc       E and its parts, RMS, sampled figures   reference/level_errors_reference.h
 //   max_vertex_error.cc   the exact maximum by bounded search     reference/level_errors_reference.h
 //   baseline_sequence.h   baselines of nested levels            BaselineErrors level by level
-//   smallest_level.h      the smallest useful level (bisection)
+//   smallest_level.h      the fewest joints within a bound (bisection on probe frames)
+//   greedy_ranking.h      removal by error                  reference/greedy_ranking_reference.h
+// and, for levels by cost (pipeline/cost_levels.h), beyond the paper:
+//   influence_cap.h       k influences per vertex, re-solved   reference/influence_cap_reference.h
+//   simplify_mesh.h       a simplified mesh (meshoptimizer) and the points that stand for
+//                         the removed vertices
+//   pose_rate.h           stored frames and their interpolation
+//   level_deviation.h     the honest error of a level's own surface (skins every frame)
 #pragma once
 
 #include <cstdint>

@@ -18,7 +18,7 @@ StatusOr<io::GltfExport> ExportLevelGltf(const io::Asset& character, std::string
   const proto::LevelView* chosen = nullptr;
   std::string available;
   for (const proto::LevelView& level : view->levels()) {
-    if (static_cast<int>(level.kept_count()) == joints) chosen = &level;
+    if (chosen == nullptr && static_cast<int>(level.kept_count()) == joints) chosen = &level;
     available += (available.empty() ? "" : ", ") + std::to_string(level.kept_count());
   }
   if (chosen == nullptr) {

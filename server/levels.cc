@@ -236,7 +236,7 @@ Result<Levels::GltfFile> Levels::GetGltf(const std::string& bake_id, int joints,
   const LevelRecord* level = nullptr;
   std::string available;
   for (const LevelRecord& record : *levels) {
-    if (record.joints == joints) level = &record;
+    if (level == nullptr && record.joints == joints) level = &record;
     available += (available.empty() ? "" : ", ") + std::to_string(record.joints);
   }
   if (level == nullptr) {
