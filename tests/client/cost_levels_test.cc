@@ -20,6 +20,7 @@
 #include "pipeline/bake.h"
 #include "proto/level_format.h"
 #include "proto/level_selection.h"
+#include "tests/client/baked.h"
 #include "tests/server/daemon.h"
 
 namespace motionlod::client::testing {
@@ -28,50 +29,15 @@ namespace {
 using server::testing::SharedDataPath;
 using server::testing::SourcePath;
 
-struct Ladder {
-  std::shared_ptr<const core::Character> character;
-  proto::AlignedBytes bytes;
-  proto::LevelSetView view;
-  nlohmann::json report;
-};
-
-Ladder BakeLadder(const std::string& path, const std::string& animation) {
-  Ladder ladder;
-  auto asset = io::LoadAssetFile(path);
-  EXPECT_TRUE(asset.ok()) << asset.status().ToString();
-  if (!asset.ok()) return ladder;
-  pipeline::BakeRequest request;
-  request.character = *asset;
-  request.clips = {{nullptr, animation, ""}};
-  request.threads = 2;
-  request.measure_skinning_pass = false;
-  auto inputs = pipeline::PrepareInputs(request);
-  auto output = pipeline::Bake(request);
-  EXPECT_TRUE(inputs.ok() && output.ok()) << (output.ok() ? "" : output.status().ToString());
-  if (!inputs.ok() || !output.ok()) return ladder;
-  ladder.character = inputs->character;
-  ladder.bytes = proto::AlignedBytes::CopyOf(output->level_set);
-  ladder.report = output->report;
-  auto view = proto::DecodeLevelSet(ladder.bytes.bytes());
-  EXPECT_TRUE(view.ok()) << view.status().ToString();
-  if (view.ok()) ladder.view = std::move(*view);
-  return ladder;
-}
-
-SkinMesh MeshOf(const core::Character& character) {
-  const core::RawSkin& skin = character.skin();
-  const size_t p = skin.positions.size();
-  return SkinMesh{{skin.positions.data()->data(), 3 * p},
-                  {skin.normals.data()->data(), 3 * p},
-                  skin.influence_offsets,
-                  skin.influence_joints,
-                  skin.influence_weights};
+// A bake's default ladder, levels by cost, of one clip.
+Baked BakeLadder(const std::string& path, const std::string& animation) {
+  return BakeInProcess(path, animation, {}, core::Variant::kVPNOPD);
 }
 
 // Level l of `ladder` drawn by the client on every frame of every clip against level 0
 // (the original): the largest distance, percent of the height, of an original vertex from
 // the point of the level's surface that stands for it.
-double MeasuredMaxErrorPct(const Ladder& ladder, uint32_t l) {
+double MeasuredMaxErrorPct(const Baked& ladder, uint32_t l) {
   const core::Character& character = *ladder.character;
   const SkinMesh mesh = MeshOf(character);
   const proto::LevelView& level = ladder.view.level(l);
@@ -124,7 +90,7 @@ double MeasuredMaxErrorPct(const Ladder& ladder, uint32_t l) {
   return 100 * worst / character.height();
 }
 
-void ExpectAnHonestLadder(const Ladder& ladder, const std::string& what) {
+void ExpectAnHonestLadder(const Baked& ladder, const std::string& what) {
   ASSERT_GE(ladder.view.level_count(), 2u) << what << ": the ladder saves nothing";
   // The full level is the original: every joint, vertex and influence, every frame.
   const proto::LevelView& full = ladder.view.level(0);
@@ -159,7 +125,7 @@ void ExpectAnHonestLadder(const Ladder& ladder, const std::string& what) {
 }
 
 TEST(CostLevels, TheSamplesLadderIsHonestAndCheaper) {
-  const Ladder ladder = BakeLadder(SourcePath("samples/Rig_Medium_MovementBasic.glb"), "Walking_A");
+  const Baked ladder = BakeLadder(SourcePath("samples/Rig_Medium_MovementBasic.glb"), "Walking_A");
   ExpectAnHonestLadder(ladder, "sample");
   // Far levels cut the mesh, the influences or the pose rate, not only joints.
   const proto::LevelView& coarsest = ladder.view.level(ladder.view.level_count() - 1);

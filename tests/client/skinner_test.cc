@@ -11,6 +11,7 @@
 #include "io/asset.h"
 #include "pipeline/bake.h"
 #include "proto/level_format.h"
+#include "tests/client/baked.h"
 #include "tests/server/daemon.h"
 
 namespace motionlod::client::testing {
@@ -18,46 +19,6 @@ namespace {
 
 using server::testing::SharedDataPath;
 using server::testing::SourcePath;
-
-struct Baked {
-  std::shared_ptr<const core::Character> character;
-  proto::AlignedBytes bytes;
-  proto::LevelSetView view;
-};
-
-Baked BakeInProcess(const std::string& path, const std::string& animation,
-                    std::vector<int> levels, core::Variant variant) {
-  Baked baked;
-  auto asset = io::LoadAssetFile(path);
-  EXPECT_TRUE(asset.ok()) << asset.status().ToString();
-  if (!asset.ok()) return baked;
-  pipeline::BakeRequest request;
-  request.character = *asset;
-  request.clips = {{nullptr, animation, ""}};
-  request.levels = std::move(levels);
-  request.settings.variant = variant;
-  request.threads = 2;
-  auto inputs = pipeline::PrepareInputs(request);
-  auto output = pipeline::Bake(request);
-  EXPECT_TRUE(inputs.ok() && output.ok());
-  if (!inputs.ok() || !output.ok()) return baked;
-  baked.character = inputs->character;
-  baked.bytes = proto::AlignedBytes::CopyOf(output->level_set);
-  auto view = proto::DecodeLevelSet(baked.bytes.bytes());
-  EXPECT_TRUE(view.ok()) << view.status().ToString();
-  if (view.ok()) baked.view = std::move(*view);
-  return baked;
-}
-
-SkinMesh MeshOf(const core::Character& character) {
-  const core::RawSkin& skin = character.skin();
-  const size_t p = skin.positions.size();
-  return SkinMesh{{skin.positions.data()->data(), 3 * p},
-                  {skin.normals.data()->data(), 3 * p},
-                  skin.influence_offsets,
-                  skin.influence_joints,
-                  skin.influence_weights};
-}
 
 // For every level and a spread of frames: the client's skinner on the level's m matrices
 // against core::SkinningJob on the n matrices they stand for (K_j = K'_{map[j]}).
