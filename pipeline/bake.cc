@@ -4,6 +4,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -20,6 +21,10 @@
 
 namespace motionlod::pipeline {
 namespace {
+
+// Full detail further off than this (percent of the height) in a rigid variant: the clip
+// scales joints.
+constexpr double kRigidMissPct = 0.1;
 
 using Clock = std::chrono::steady_clock;
 
@@ -424,6 +429,27 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
   for (CostLevel& level : ladder) {
     const core::LevelResult* skeleton = &solved.at(level.skeleton.kept_count());
     baked.push_back({std::move(level), skeleton});
+  }
+  // A rigid variant cannot follow a clip that scales joints: there even full detail is off,
+  // and no level is within a pixel budget. Say which clips, and what would follow them.
+  if (core::IsRigid(request.settings.variant) && baked.front().level.skeleton.kept_count() == n) {
+    const core::LevelDeviation& full = baked.front().level.deviation;
+    std::string clips_off;
+    double worst = 0;
+    for (size_t c = 0; c < full.per_clip.size(); ++c) {
+      if (full.per_clip[c].max_pct <= kRigidMissPct) continue;
+      clips_off += (clips_off.empty() ? "'" : ", '") + motion.Clips()[c].name + "'";
+      worst = std::max(worst, full.per_clip[c].max_pct);
+    }
+    if (!clips_off.empty()) {
+      char figure[32];
+      std::snprintf(figure, sizeof figure, "%.3g", worst);
+      inputs->warnings.push_back("the rigid variant " + std::string(core::VariantName(request.settings.variant)) +
+                                 " cannot follow the joint scaling of clip(s) " + clips_off +
+                                 ": full detail is up to " + figure +
+                                 "% of the height off there, so no level is within budget; bake them "
+                                 "apart or in vp or vpno");
+    }
   }
 
   // Fig. 7: the four variants at every level, errors only.

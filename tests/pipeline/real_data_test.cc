@@ -660,6 +660,26 @@ TEST_F(RealData, TheDefaultLadderGetsCheaperWithinTheBudget) {
   }
 }
 
+// A clip that scales joints to nothing (Rig_Medium_General's Spawn_Air) is out of a rigid
+// variant's reach even at full detail: the bake says which clip.
+TEST_F(RealData, ARigidBakeNamesTheClipsItCannotFollow) {
+  auto asset = io::LoadAssetFile(DataPath("characters/Rig_Medium_General.glb"));
+  ASSERT_TRUE(asset.ok());
+  BakeRequest request = DefaultLadderRequest(*asset, core::Variant::kVPNOPD);
+  request.clips = {{nullptr, "Hit_A", ""}, {nullptr, "Spawn_Air", ""}};
+  auto output = Bake(request);
+  ASSERT_TRUE(output.ok()) << output.status().ToString();
+  std::string named;
+  for (const std::string& warning : output->warnings) {
+    if (warning.find("cannot follow the joint scaling") != std::string::npos) named = warning;
+  }
+  EXPECT_NE(named.find("'Spawn_Air'"), std::string::npos) << named;
+  EXPECT_EQ(named.find("Hit_A"), std::string::npos) << named;
+  const nlohmann::json& full = output->report["levels"][0];
+  EXPECT_GT(full["per_clip"][1]["max_vertex_error_pct"].get<double>(), 1.0);
+  EXPECT_LT(full["per_clip"][0]["max_vertex_error_pct"].get<double>(), 0.1);
+}
+
 // The levels by cost are the same on any number of threads: the ladder, and the level set
 // to the byte.
 TEST_F(RealData, TheDefaultLadderDoesNotDependOnTheThreads) {
