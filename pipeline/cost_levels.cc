@@ -12,9 +12,9 @@
 namespace motionlod::pipeline {
 namespace {
 
-// Shares of the budget the simplified mesh may take, the rest left to the skeleton, the
-// influences and the pose rate; 0 keeps the original mesh.
-// A simplified surface deviates two to four times its bind-pose error once skinned (measured
+// Shares of the budget a simplified mesh may take (its bind-pose error), the rest left to
+// the skeleton, the influences and the pose rate; the whole mesh is tried besides. A
+// simplified surface deviates two to four times its bind-pose error once skinned (measured
 // on CesiumMan, Fox and RobotExpressive), hence the small shares.
 constexpr double kMeshShares[] = {0.3, 0.2, 0.12, 0.07};
 // The skeleton is searched within this part of what the mesh leaves, the rest for the

@@ -8,9 +8,10 @@
 // detail): every vertex pays one blend per influence it uses, every kept joint one matrix
 // to play (sample or interpolate) and upload,
 //   cost = (vertices x mean influences + kJointCost x joints) / (the same at full detail),
-// kJointCost in vertex-influences, set from the client's skinner on this machine
-// (docs/PERFORMANCE.md, "Crowd"). The pose rate does not enter it: interpolating two
-// stored poses costs what playing one does; it saves stream bytes.
+// kJointCost in vertex-influences: an estimate (the crowd bench measures a joint's matrix
+// update at about 14 vertex-influences of the client's skinning on an AMD EPYC;
+// docs/PERFORMANCE.md, "Crowd"). The pose rate does not enter it: interpolating two stored
+// poses costs what playing one does; it saves stream bytes.
 #pragma once
 
 #include <limits>
