@@ -2,7 +2,7 @@
 // 12 px tall), per skinned, animated character of the data: what each level keeps
 // (joints, vertices, triangles, influences, pose stride), the largest height at which its
 // honest maximum error stays within 1 px, its modelled cost against full detail, and the
-// time to build the ladder.
+// time to build the ladder; then re-solved weights against truncated ones at caps 1, 2, 4.
 //
 //   motionlod_bench_cost_ladder [variant=vpno+pd] [threads=2] [file ...]
 #include <chrono>
@@ -10,10 +10,13 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <numeric>
 #include <string>
 #include <vector>
 
 #include "core/greedy_ranking.h"
+#include "core/influence_cap.h"
+#include "core/reduce_skeleton.h"
 #include "io/asset.h"
 #include "pipeline/bake.h"
 #include "pipeline/cost_levels.h"
@@ -83,6 +86,27 @@ int Main(int argc, char** argv) {
                   level.deviation.max_pct, level.cost);
     }
     std::printf("%-28s ladder in %.2f s\n", file.filename().c_str(), seconds);
+    // Re-solved weights against truncated ones at every cap, on the full skeleton and on the
+    // level of half its joints: the weight step's objective summed over vertices and frames.
+    for (int kept : {character.joint_count(), (character.joint_count() + 1) / 2}) {
+      auto level = core::ReduceSkeletonToCount(character, *ranking, kept);
+      Check(level.status(), "level");
+      auto solved = (*prepared)->SolveLevel(*level);
+      Check(solved.status(), "solve");
+      std::printf("%-28s %d joints, re-solved / truncated square error:", file.filename().c_str(), kept);
+      for (int cap : {1, 2, 4}) {
+        auto truncated = core::TruncateInfluences(character, *level, cap);
+        auto resolved = core::InfluenceCapJob{prepared->get(), &*level, solved->matrices, cap, 0}.Run();
+        Check(truncated.ok() ? resolved.status() : truncated.status(), "influences");
+        auto before = core::InfluenceObjective(**prepared, *level, solved->matrices, *truncated, 0);
+        auto after = core::InfluenceObjective(**prepared, *level, solved->matrices, *resolved, 0);
+        Check(before.ok() ? after.status() : before.status(), "objective");
+        const double sum_before = std::accumulate(before->begin(), before->end(), 0.0);
+        const double sum_after = std::accumulate(after->begin(), after->end(), 0.0);
+        std::printf(" cap %d %.3g", cap, sum_before > 0 ? sum_after / sum_before : 1.0);
+      }
+      std::printf("\n");
+    }
     std::fflush(stdout);
   }
   return 0;
