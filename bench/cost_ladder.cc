@@ -1,6 +1,7 @@
 // The ladder of levels by cost (pipeline/cost_levels.h: the cheapest within 1 px at 800 to
 // 12 px tall), per skinned, animated character of the data: what each level keeps
-// (joints, vertices, triangles, influences, pose stride), the largest height at which its
+// (joints, vertices, triangles, influences, pose stride, the simplified mesh's bind-pose
+// error), the largest height at which its
 // honest maximum error stays within 1 px, its modelled cost against full detail, and the
 // time to build the ladder; then re-solved weights against truncated ones at caps 1, 2, 4.
 //
@@ -50,8 +51,8 @@ int Main(int argc, char** argv) {
   pipeline::TaskPool pool(threads);
   std::printf("variant %s, %d threads; the cheapest level within 1 px at each height\n",
               core::VariantName(*variant), threads);
-  std::printf("%-28s %7s | %6s %6s %6s %5s %3s %7s %6s\n", "character", "max px", "joints", "verts",
-              "tris", "infl", "r", "error%", "cost");
+  std::printf("%-28s %7s | %6s %6s %6s %5s %3s %7s %7s %6s\n", "character", "max px", "joints",
+              "verts", "tris", "infl", "r", "mesh%", "error%", "cost");
   for (const fs::path& file : files) {
     auto asset = io::LoadAssetFile(file.string());
     Check(asset.status(), file.string());
@@ -80,9 +81,10 @@ int Main(int argc, char** argv) {
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     for (const pipeline::CostLevel& level : *ladder) {
       const double px = level.deviation.max_pct > 0 ? 100.0 / level.deviation.max_pct : INFINITY;
-      std::printf("%-28s %7.0f | %6d %6d %6d %5.2f %3d %7.3f %6.3f\n", file.filename().c_str(), px,
+      const double bind_pct = level.mesh ? 100.0 * level.mesh->bind_error / character.height() : 0.0;
+      std::printf("%-28s %7.0f | %6d %6d %6d %5.2f %3d %7.3f %7.3f %6.3f\n", file.filename().c_str(), px,
                   level.skeleton.kept_count(), level.vertex_count(character),
-                  level.triangle_count(character), level.mean_influences, level.frame_stride,
+                  level.triangle_count(character), level.mean_influences, level.frame_stride, bind_pct,
                   level.deviation.max_pct, level.cost);
     }
     std::printf("%-28s ladder in %.2f s\n", file.filename().c_str(), seconds);
