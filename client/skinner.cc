@@ -179,6 +179,9 @@ Result<LevelSkin> LevelSkin::BuildSkin(const SkinMesh& mesh, std::span<const uin
       return Invalid("SkinMesh: vertex " + std::to_string(i) + " has no influence");
     skin.offsets_.push_back(static_cast<uint32_t>(skin.slots_.size()));
   }
+  skin.one_slot_each_ =
+      skin.slots_.size() == count &&
+      std::all_of(skin.weights_.begin(), skin.weights_.end(), [](float w) { return w == 1.0f; });
   return skin;
 }
 
@@ -219,6 +222,48 @@ Result<uint32_t> SkinFrameJob::Validate() const {
   return skin->vertex_count();
 }
 
+namespace {
+
+// Poses vertex `v` (normal `n`, or null) by B = `b` (12 floats, row-major 3x4) into `o`
+// and `on`. Rigid: the normal by B's 3x3, else by cof(B); renormalised unless `unit` says
+// B's 3x3 is a rotation (it keeps unit normals unit).
+inline void PoseVertex(const float* b, const float* v, const float* n, bool rigid, bool unit,
+                       float* o, float* on) {
+  o[0] = b[0] * v[0] + b[1] * v[1] + b[2] * v[2] + b[3];
+  o[1] = b[4] * v[0] + b[5] * v[1] + b[6] * v[2] + b[7];
+  o[2] = b[8] * v[0] + b[9] * v[1] + b[10] * v[2] + b[11];
+  if (n == nullptr) return;
+  float x, y, z;
+  if (rigid) {
+    x = b[0] * n[0] + b[1] * n[1] + b[2] * n[2];
+    y = b[4] * n[0] + b[5] * n[1] + b[6] * n[2];
+    z = b[8] * n[0] + b[9] * n[1] + b[10] * n[2];
+  } else {
+    // cof(B) n = n0 (c1 x c2) + n1 (c2 x c0) + n2 (c0 x c1), c the columns of B's 3x3.
+    const float c0[3] = {b[0], b[4], b[8]}, c1[3] = {b[1], b[5], b[9]},
+                c2[3] = {b[2], b[6], b[10]};
+    x = n[0] * (c1[1] * c2[2] - c1[2] * c2[1]) + n[1] * (c2[1] * c0[2] - c2[2] * c0[1]) +
+        n[2] * (c0[1] * c1[2] - c0[2] * c1[1]);
+    y = n[0] * (c1[2] * c2[0] - c1[0] * c2[2]) + n[1] * (c2[2] * c0[0] - c2[0] * c0[2]) +
+        n[2] * (c0[2] * c1[0] - c0[0] * c1[2]);
+    z = n[0] * (c1[0] * c2[1] - c1[1] * c2[0]) + n[1] * (c2[0] * c0[1] - c2[1] * c0[0]) +
+        n[2] * (c0[0] * c1[1] - c0[1] * c1[0]);
+  }
+  if (unit) {
+    on[0] = x;
+    on[1] = y;
+    on[2] = z;
+    return;
+  }
+  const float length = std::sqrt(x * x + y * y + z * z);
+  const float scale = length > 0 ? 1.0f / length : 0.0f;
+  on[0] = x * scale;
+  on[1] = y * scale;
+  on[2] = z * scale;
+}
+
+}  // namespace
+
 Result<uint32_t> SkinFrameJob::Run() const {
   Result<uint32_t> valid = Validate();
   if (!valid.ok()) return valid;
@@ -231,6 +276,15 @@ Result<uint32_t> SkinFrameJob::Run() const {
   const float* weights = skin->weights_.data();
   float* out_p = out_positions.data();
   float* out_n = out_normals.empty() ? nullptr : out_normals.data();
+  if (skin->one_slot_each_) {
+    // One slot of weight 1 per vertex: B is the slot's matrix, no blend.
+    for (uint32_t i = 0; i < p; ++i) {
+      PoseVertex(k + size_t{slots[i]} * 12, positions + size_t{i} * 3,
+                 out_n == nullptr ? nullptr : normals + size_t{i} * 3, rigid, rigid,
+                 out_p + size_t{i} * 3, out_n == nullptr ? nullptr : out_n + size_t{i} * 3);
+    }
+    return p;
+  }
   for (uint32_t i = 0; i < p; ++i) {
     // B = sum_s W_is K_s: 12 multiply-adds per influence, then one transform.
     float b[12];
@@ -244,35 +298,9 @@ Result<uint32_t> SkinFrameJob::Run() const {
       const float* m = k + size_t{slots[e]} * 12;
       for (int c = 0; c < 12; ++c) b[c] += w * m[c];
     }
-    const float* v = positions + size_t{i} * 3;
-    float* o = out_p + size_t{i} * 3;
-    o[0] = b[0] * v[0] + b[1] * v[1] + b[2] * v[2] + b[3];
-    o[1] = b[4] * v[0] + b[5] * v[1] + b[6] * v[2] + b[7];
-    o[2] = b[8] * v[0] + b[9] * v[1] + b[10] * v[2] + b[11];
-    if (out_n == nullptr) continue;
-    const float* n = normals + size_t{i} * 3;
-    float x, y, z;
-    if (rigid) {
-      x = b[0] * n[0] + b[1] * n[1] + b[2] * n[2];
-      y = b[4] * n[0] + b[5] * n[1] + b[6] * n[2];
-      z = b[8] * n[0] + b[9] * n[1] + b[10] * n[2];
-    } else {
-      // cof(B) n = n0 (c1 x c2) + n1 (c2 x c0) + n2 (c0 x c1), c the columns of B's 3x3.
-      const float c0[3] = {b[0], b[4], b[8]}, c1[3] = {b[1], b[5], b[9]},
-                  c2[3] = {b[2], b[6], b[10]};
-      x = n[0] * (c1[1] * c2[2] - c1[2] * c2[1]) + n[1] * (c2[1] * c0[2] - c2[2] * c0[1]) +
-          n[2] * (c0[1] * c1[2] - c0[2] * c1[1]);
-      y = n[0] * (c1[2] * c2[0] - c1[0] * c2[2]) + n[1] * (c2[2] * c0[0] - c2[0] * c0[2]) +
-          n[2] * (c0[2] * c1[0] - c0[0] * c1[2]);
-      z = n[0] * (c1[0] * c2[1] - c1[1] * c2[0]) + n[1] * (c2[0] * c0[1] - c2[1] * c0[0]) +
-          n[2] * (c0[0] * c1[1] - c0[1] * c1[0]);
-    }
-    const float length = std::sqrt(x * x + y * y + z * z);
-    const float scale = length > 0 ? 1.0f / length : 0.0f;
-    float* on = out_n + size_t{i} * 3;
-    on[0] = x * scale;
-    on[1] = y * scale;
-    on[2] = z * scale;
+    PoseVertex(b, positions + size_t{i} * 3, out_n == nullptr ? nullptr : normals + size_t{i} * 3,
+               rigid, false, out_p + size_t{i} * 3,
+               out_n == nullptr ? nullptr : out_n + size_t{i} * 3);
   }
   return p;
 }

@@ -80,6 +80,9 @@ class LevelSkin {
   std::vector<uint32_t> vertex_ids_;
   std::vector<uint32_t> triangles_;
   uint32_t kept_count_ = 0;
+  // Every vertex on one slot with weight 1 (one influence per vertex): SkinFrameJob skips
+  // the blend, and rigid levels the normals' renormalisation.
+  bool one_slot_each_ = false;
   std::vector<uint32_t> offsets_;  // p + 1
   std::vector<uint16_t> slots_;    // s of each merged influence
   std::vector<float> weights_;     // W_is

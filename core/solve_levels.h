@@ -88,7 +88,7 @@ inline bool IsRigid(Variant v) { return v == Variant::kVPPD || v == Variant::kVP
 inline bool FitsNormals(Variant v) { return v == Variant::kVPNO || v == Variant::kVPNOPD; }
 
 // Bumped whenever results for the same inputs and settings may change.
-inline constexpr uint32_t kAlgorithmVersion = 8;
+inline constexpr uint32_t kAlgorithmVersion = 9;
 
 struct SolveSettings {
   Variant variant = Variant::kVPNOPD;

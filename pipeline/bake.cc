@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -50,6 +51,19 @@ Status BakeRequest::Validate() const {
   }
   if (all_levels && !levels.empty()) {
     return InvalidArgument("ask for explicit levels or for all levels, not both");
+  }
+  if (!ladder_heights_px.empty()) {
+    if (!levels.empty() || all_levels) {
+      return InvalidArgument("ladder heights choose levels by cost: not with explicit levels");
+    }
+    if (ladder_heights_px.size() > kMaxLadderHeights ||
+        !std::all_of(ladder_heights_px.begin(), ladder_heights_px.end(),
+                     [](double px) { return px >= 1 && px <= 100000; }) ||
+        std::adjacent_find(ladder_heights_px.begin(), ladder_heights_px.end(),
+                           std::less_equal<>()) != ladder_heights_px.end()) {
+      return InvalidArgument("ladder heights must decrease, each in [1, 100000] px, at most " +
+                             std::to_string(kMaxLadderHeights));
+    }
   }
   // Bake starts its pool's threads up front.
   if (threads < 0 || threads > kMaxThreads) {
@@ -411,6 +425,7 @@ StatusOr<BakeOutput> Bake(const BakeRequest& request, const ProgressCallback& pr
     job.ranking = ranking;
     job.simd = request.simd;
     job.parts = request.level_parts;
+    if (!request.ladder_heights_px.empty()) job.heights_px = request.ladder_heights_px;
     auto built = job.Run(pool);
     if (!built.ok()) return built.status();
     ladder = *std::move(built);

@@ -58,6 +58,10 @@ struct BakeRequest {
   // What the default ladder's levels may cut (pipeline/cost_levels.h): everything unless a
   // part is switched off.
   CostLevelParts level_parts;
+  // The on-screen heights (px, decreasing) the default ladder picks its levels for; empty =
+  // CostLadderJob's spread. Only with the default ladder (no levels, not all_levels).
+  std::vector<double> ladder_heights_px;
+  static constexpr size_t kMaxLadderHeights = 32;
   core::SolveSettings settings;
   // The machine version of the core's hot loops (core/simd.h): the programs read it from
   // MOTIONLOD_SIMD.

@@ -28,9 +28,13 @@ constexpr int kProbeFrames = 96;
 // A simplification that keeps more of the triangles than this is not worth a mesh.
 constexpr double kMostTrianglesKept = 0.8;
 
-double MeanInfluences(const core::RawSkin& skin) {
-  return static_cast<double>(skin.influence_joints.size()) /
-         static_cast<double>(skin.positions.size());
+// The modelled units of one frame (the header's model).
+double CostUnits(const DrawnLevel& level) {
+  const double per_vertex = level.one_influence_each ? kSingleInfluenceVertexCost
+                                                     : kVertexCost + level.mean_influences;
+  const double interpolated_share = 1 - 1.0 / level.frame_stride;
+  return kDrawCost + level.vertices * per_vertex +
+         level.joints * (kJointCost + kInterpolatedJointCost * interpolated_share);
 }
 
 // A frame step of about frames / kProbeFrames, prime to 2 and 3 so that the probe sees
@@ -43,12 +47,17 @@ int ProbeStep(int frames) {
 
 }  // namespace
 
-double LevelCost(const core::Character& character, double vertices, double mean_influences,
-                 int joints) {
+double LevelCost(const core::Character& character, const DrawnLevel& level) {
   const core::RawSkin& skin = character.skin();
-  const double full = static_cast<double>(skin.positions.size()) * MeanInfluences(skin) +
-                      kJointCost * character.joint_count();
-  return (vertices * mean_influences + kJointCost * joints) / full;
+  const bool one_each =
+      skin.influence_weights.size() == skin.positions.size() &&
+      std::all_of(skin.influence_weights.begin(), skin.influence_weights.end(),
+                  [](float w) { return w == 1.0f; });
+  const double influences = static_cast<double>(skin.influence_joints.size());
+  const DrawnLevel full{static_cast<double>(skin.positions.size()),
+                        influences / static_cast<double>(skin.positions.size()), one_each,
+                        character.joint_count(), 1};
+  return CostUnits(level) / CostUnits(full);
 }
 
 CostLevel SkeletonLevel(const core::Character& character, const core::LevelResult& solved) {
@@ -69,8 +78,12 @@ CostLevel SkeletonLevel(const core::Character& character, const core::LevelResul
   }
   const core::ReducedInfluences merged = core::ReduceInfluences(character.skin(), solved.skeleton);
   level.mean_influences = static_cast<double>(merged.slots.size()) / character.vertex_count();
-  level.cost = LevelCost(character, character.vertex_count(), level.mean_influences,
-                         solved.skeleton.kept_count());
+  const bool one_each =
+      merged.slots.size() == static_cast<size_t>(character.vertex_count()) &&
+      std::all_of(merged.weights.begin(), merged.weights.end(), [](float w) { return w == 1.0f; });
+  level.cost = LevelCost(character, {static_cast<double>(character.vertex_count()),
+                                     level.mean_influences, one_each,
+                                     solved.skeleton.kept_count(), 1});
   return level;
 }
 
@@ -213,8 +226,10 @@ StatusOr<std::optional<CostLevel>> CheapestLevelJob::Run(TaskPool& pool) const {
         best = candidate;
       }
       if (fits) {
-        best.level.cost = LevelCost(character, best.level.vertex_count(character),
-                                    best.level.mean_influences, best.level.skeleton.kept_count());
+        best.level.cost = LevelCost(
+            character, {static_cast<double>(best.level.vertex_count(character)),
+                        best.level.mean_influences, cap == 1, best.level.skeleton.kept_count(),
+                        best.level.frame_stride});
         candidates.push_back(std::move(best));
         break;  // a larger cap costs more at the same vertices and joints
       }

@@ -4,14 +4,17 @@
 // core/simplify_mesh.h), influences per vertex (re-solved weights, core/influence_cap.h)
 // and stored poses (core/pose_rate.h).
 //
-// The cost model (what one frame of a level costs a CPU or GPU skinner, relative to full
-// detail): every vertex pays one blend per influence it uses, every kept joint one matrix
-// to play (sample or interpolate) and upload,
-//   cost = (vertices x mean influences + kJointCost x joints) / (the same at full detail),
-// kJointCost in vertex-influences: an estimate (the crowd bench measures a joint's matrix
-// update at about 14 vertex-influences of the client's skinning on an AMD EPYC;
-// docs/PERFORMANCE.md, "Crowd"). The pose rate does not enter it: interpolating two stored
-// poses costs what playing one does; it saves stream bytes.
+// The cost model: what one frame of a level costs the client's CPU skinner
+// (client/skinner.h), relative to full detail, in units of one influence's blend:
+//   a draw          kDrawCost
+//   each vertex     kVertexCost + its influences (transform, normal, output and the blend),
+//                   or kSingleInfluenceVertexCost when every vertex is bound to one joint
+//                   with weight 1 (no blend, and a rigid normal needs no renormalising)
+//   each joint      kJointCost per stored pose (a copy into the palette), plus
+//                   kInterpolatedJointCost on the frames played between stored poses
+// The constants are `motionlod_bench_crowd`'s "Cost model" on an AMD EPYC (docs/
+// PERFORMANCE.md, "Crowd"): 1.8 ns an influence there. A GPU renderer pays little per
+// vertex and more per joint (the upload); the level table's stream bytes say that part.
 #pragma once
 
 #include <limits>
@@ -29,7 +32,11 @@
 
 namespace motionlod::pipeline {
 
-inline constexpr double kJointCost = 24.0;
+inline constexpr double kDrawCost = 20;
+inline constexpr double kVertexCost = 2.1;
+inline constexpr double kSingleInfluenceVertexCost = 2.25;
+inline constexpr double kJointCost = 0.5;
+inline constexpr double kInterpolatedJointCost = 18;
 
 // One level with its own mesh, influences and pose rate.
 struct CostLevel {
@@ -52,10 +59,17 @@ struct CostLevel {
   }
 };
 
-// The modelled cost of drawing `vertices` with `mean_influences` each and `joints`
-// matrices, relative to `character` at full detail.
-double LevelCost(const core::Character& character, double vertices, double mean_influences,
-                 int joints);
+// What a level draws each frame, as the cost model counts it.
+struct DrawnLevel {
+  double vertices = 0;
+  double mean_influences = 0;
+  bool one_influence_each = false;  // every vertex on one joint with weight 1
+  int joints = 0;
+  int frame_stride = 1;
+};
+
+// The modelled cost of `level`, relative to `character` at full detail.
+double LevelCost(const core::Character& character, const DrawnLevel& level);
 
 // A level of the skeleton's solve alone (`--levels`): the whole mesh, the mesh's
 // influences merged through the joint map (no influences of its own: LevelInfluences
@@ -104,7 +118,9 @@ struct CostLadderJob {
   const core::Motion* motion = nullptr;
   const core::JointRanking* ranking = nullptr;
   core::SimdChoice simd = core::SimdChoice::kWidest;
-  std::vector<double> heights_px = {800, 400, 200, 100, 50, 25, 12};  // decreasing
+  // Decreasing; dense where crowds are (three characters in four under 35 px in the
+  // crowd bench's wedge), where each step down saves most.
+  std::vector<double> heights_px = {800, 400, 200, 100, 70, 50, 35, 25, 20, 16, 12};
   double budget_px = 1;
   CostLevelParts parts;
 

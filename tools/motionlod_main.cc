@@ -1,7 +1,8 @@
 // motionlod: the command-line bake tool.
 //   motionlod info CHARACTER
 //   motionlod rank CHARACTER [--motion M] [--animation NAME]... [--fps F] [--lock J,...] [--json]
-//   motionlod bake CHARACTER [--motion M] [--animation NAME]... [--levels 30,20,10,5 | --all-levels]
+//   motionlod bake CHARACTER [--motion M] [--animation NAME]...
+//                  [--levels 30,20,10,5 | --all-levels | --heights 800,400,...]
 //                  [--variant vpno+pd] [--fps F] [--lock J,...] [--threads N] [--curves] --out DIR
 //   motionlod export CHARACTER [--motion M] [--animation NAME]... [--variant vpno+pd] [--fps F]
 //                    [--lock J,...] [--joints N] [--level-set DIR/levels.mlod] --out FILE.glb
@@ -223,17 +224,27 @@ void PrintLevelTable(const nlohmann::json& report) {
               report["timing"]["skinning_pass_seconds"].get<double>(), report["timing"]["threads"].get<int>());
 }
 
-int RunBake(const CommonOptions& o, const std::vector<int>& levels, bool all_levels,
-            const std::string& variant, bool keep_pd_translation, bool curves, const std::string& out) {
-  auto parsed_variant = core::ParseVariant(variant);
+// What `bake` asks for beyond the common options.
+struct BakeOptions {
+  std::vector<int> levels;
+  bool all_levels = false;
+  std::vector<double> heights_px;
+  std::string variant = "vpno+pd";
+  bool keep_pd_translation = false, curves = false;
+  std::string out;
+};
+
+int RunBake(const CommonOptions& o, const BakeOptions& b) {
+  auto parsed_variant = core::ParseVariant(b.variant);
   if (!parsed_variant.ok()) return Fail(parsed_variant.status());
   auto request = MakeRequest(o);
   if (!request.ok()) return Fail(request.status());
-  request->levels = levels;
-  request->all_levels = all_levels;
+  request->levels = b.levels;
+  request->all_levels = b.all_levels;
+  request->ladder_heights_px = b.heights_px;
   request->settings.variant = *parsed_variant;
-  request->settings.resolve_rigid_translation = !keep_pd_translation;
-  request->variant_curves = curves;
+  request->settings.resolve_rigid_translation = !b.keep_pd_translation;
+  request->variant_curves = b.curves;
   request->source_hash = SourceHash(o);
   for (const std::string& w : request->character->warnings()) std::cerr << "motionlod: warning: " << w << "\n";
   std::optional<pipeline::BakeOutput> output;
@@ -245,13 +256,13 @@ int RunBake(const CommonOptions& o, const std::vector<int>& levels, bool all_lev
   }
   for (const std::string& w : output->warnings) std::cerr << "motionlod: warning: " << w << "\n";
   if (Status status = WriteDirectoryAtomically(
-          out, {{"levels.mlod", output->level_set}, {"report.json", output->report.dump(2) + "\n"}});
+          b.out, {{"levels.mlod", output->level_set}, {"report.json", output->report.dump(2) + "\n"}});
       !status.ok()) {
     return Fail(status, kExitOutput);
   }
   PrintLevelTable(output->report);
-  std::printf("wrote %s/levels.mlod (%zu bytes) and %s/report.json\n", out.c_str(),
-              output->level_set.size(), out.c_str());
+  std::printf("wrote %s/levels.mlod (%zu bytes) and %s/report.json\n", b.out.c_str(),
+              output->level_set.size(), b.out.c_str());
   return 0;
 }
 
@@ -330,18 +341,26 @@ int Main(int argc, char** argv) {
   rank->add_flag("--json", rank_json, "print JSON");
 
   CommonOptions bake_options;
-  std::vector<int> levels;
-  bool all_levels = false, keep_pd_translation = false, curves = false;
-  std::string variant = "vpno+pd", out;
+  BakeOptions bake_choices;
   CLI::App* bake = app.add_subcommand("bake", "bake a level set and its report");
   AddCommon(bake, bake_options);
-  auto* levels_option = bake->add_option("--levels", levels, "kept joint counts, e.g. 30,20,10,5")->delimiter(',');
-  bake->add_flag("--all-levels", all_levels, "every level from all joints down to the root")->excludes(levels_option);
-  bake->add_option("--variant", variant, "vp, vpno, vp+pd or vpno+pd (rigid)")->capture_default_str();
-  bake->add_flag("--keep-pd-translation", keep_pd_translation,
+  auto* levels_option = bake->add_option("--levels", bake_choices.levels,
+                                         "kept joint counts, e.g. 30,20,10,5 (the skeleton alone)")
+                            ->delimiter(',');
+  auto* all_levels_option =
+      bake->add_flag("--all-levels", bake_choices.all_levels, "every level from all joints down to the root")
+          ->excludes(levels_option);
+  bake->add_option("--heights", bake_choices.heights_px,
+                   "on-screen heights in px, decreasing, the levels by cost are chosen for "
+                   "(default 800,400,200,100,50,25,12)")
+      ->delimiter(',')
+      ->excludes(levels_option)
+      ->excludes(all_levels_option);
+  bake->add_option("--variant", bake_choices.variant, "vp, vpno, vp+pd or vpno+pd (rigid)")->capture_default_str();
+  bake->add_flag("--keep-pd-translation", bake_choices.keep_pd_translation,
                  "rigid variants: keep the solved translation instead of re-solving it");
-  bake->add_flag("--curves", curves, "also solve the four variants at every level for `plot`");
-  bake->add_option("--out", out, "output directory (levels.mlod, report.json)")->required();
+  bake->add_flag("--curves", bake_choices.curves, "also solve the four variants at every level for `plot`");
+  bake->add_option("--out", bake_choices.out, "output directory (levels.mlod, report.json)")->required();
 
   CommonOptions export_options;
   std::string export_variant = "vpno+pd", level_set_path, glb_path;
@@ -372,7 +391,7 @@ int Main(int argc, char** argv) {
   for (CommonOptions* options : {&rank_options, &bake_options, &export_options}) options->simd = *simd;
   if (rank->parsed()) return RunRank(rank_options, rank_json);
   if (bake->parsed()) {
-    return RunBake(bake_options, levels, all_levels, variant, keep_pd_translation, curves, out);
+    return RunBake(bake_options, bake_choices);
   }
   if (export_command->parsed()) {
     return RunExport(export_options, export_variant, export_joints, level_set_path, glb_path);

@@ -11,9 +11,11 @@
 // with each part of a level's saving switched off (joints, vertices, influences, pose rate:
 // BakeRequest::level_parts) to give each part's share.
 //
-// Per character and frame, timed separately in the worker's CPU time
-// (CLOCK_THREAD_CPUTIME_ID: time the thread ran, so other processes on a shared machine
-// do not inflate it; the frame's wall time is reported beside it):
+// Per frame, timed in the worker's CPU time (CLOCK_THREAD_CPUTIME_ID: time the thread ran,
+// so other processes on a shared machine do not inflate it; the frame's wall time is
+// reported beside it), and split between three phases as the steady clock times them per
+// character (reading the thread's CPU clock costs about a microsecond, which per character
+// would add 3 ms a frame to both crowds):
 //   matrix update  level choice, then PlayFrame into the frame's matrix stream (what a GPU
 //                  renderer uploads: 48 m bytes)
 //   skinning       SkinFrameJob: positions and normals of the level's vertices into a
@@ -31,7 +33,8 @@
 // median of each figure.
 //
 //   crowd [--characters=1000] [--frames=120] [--threads=1,2] [--repetitions=3] [--data=DIR]
-//         [--budget=1] [--hysteresis=0.1] [--parts=1] [--json=FILE]
+//         [--budget=1] [--hysteresis=0.1] [--parts=1] [--heights=800,400,...]
+//         [--json=FILE]
 #include <time.h>
 
 #include <algorithm>
@@ -51,6 +54,7 @@
 #include <thread>
 #include <vector>
 
+#include <Eigen/Dense>
 #include <nlohmann/json.hpp>
 
 #include "client/level_selector.h"
@@ -76,6 +80,7 @@ constexpr double kScreenHeightPx = 1080;
 constexpr double kCharacterSizeM = 1.8;  // every character drawn 1.8 m tall
 constexpr double kNearM = 2, kFarM = 100;
 constexpr int kQualityEvery = 10;  // frames between quality samples
+constexpr double kRigidMissPct = 0.1;  // full detail further off: the rigid bake can't follow
 
 struct Options {
   int characters = 1000;
@@ -86,6 +91,7 @@ struct Options {
   double budget_px = 1.0;
   double hysteresis = 0.1;
   bool parts = true;  // also the ladders with each part switched off
+  std::vector<double> heights_px;  // the ladder's heights; empty: the bake's default
   std::string json_path;
 };
 
@@ -166,6 +172,9 @@ bool ParseOptions(int argc, char** argv, Options& o) {
       o.hysteresis = std::stod(value);
     } else if (name == "--parts") {
       o.parts = value != "0";
+    } else if (name == "--heights") {
+      std::stringstream list(value);
+      for (std::string item; std::getline(list, item, ',');) o.heights_px.push_back(std::stod(item));
     } else if (name == "--json") {
       o.json_path = value;
     } else {
@@ -184,6 +193,11 @@ bool ParseOptions(int argc, char** argv, Options& o) {
   return true;
 }
 
+bool RigidFullDetailMisses(std::string_view level_set) {
+  auto view = proto::DecodeLevelSet(level_set);
+  return view.ok() && view->level(0).figures().max_vertex_error_pct > kRigidMissPct;
+}
+
 std::optional<CharacterType> LoadType(const fs::path& path, const Options& o) {
   auto asset = io::LoadAssetFile(path);
   if (!asset.ok() || (*asset)->animations().empty() || (*asset)->has_proxy_skin()) {
@@ -195,6 +209,7 @@ std::optional<CharacterType> LoadType(const fs::path& path, const Options& o) {
   request.character = *asset;
   request.threads = 2;
   request.measure_skinning_pass = false;
+  request.ladder_heights_px = o.heights_px;
   auto inputs = pipeline::PrepareInputs(request);
   if (!inputs.ok()) {
     std::fprintf(stderr, "crowd: skipping %s: %s\n", path.filename().c_str(),
@@ -216,13 +231,21 @@ std::optional<CharacterType> LoadType(const fs::path& path, const Options& o) {
     if (!o.parts && &kind != &kLadderKinds[0]) break;
     request.level_parts = kind.parts;
     auto output = pipeline::Bake(request);
+    Ladder ladder;
+    ladder.name = kind.name;
+    // A rigid bake whose full detail is off (the rig scales joints: the bake warns) is
+    // baked again in vpno, as the warning advises.
+    if (output.ok() && core::IsRigid(request.settings.variant) &&
+        RigidFullDetailMisses(output->level_set)) {
+      std::fprintf(stderr, "crowd: %s scales joints: baked in vpno\n", type.label.c_str());
+      request.settings.variant = core::Variant::kVPNO;
+      output = pipeline::Bake(request);
+    }
     if (!output.ok()) {
       std::fprintf(stderr, "crowd: skipping %s: %s\n", path.filename().c_str(),
                    output.status().ToString().c_str());
       return std::nullopt;
     }
-    Ladder ladder;
-    ladder.name = kind.name;
     ladder.level_set_bytes = proto::AlignedBytes::CopyOf(output->level_set);
     auto view = proto::DecodeLevelSet(ladder.level_set_bytes.bytes());
     if (!view.ok()) return std::nullopt;
@@ -299,11 +322,13 @@ RunResult RunCrowd(const std::vector<CharacterType>& types, std::vector<Instance
     std::vector<float> scratch_positions(3 * max_vertices), scratch_normals(3 * max_vertices);
     Phases& mine = phases[static_cast<size_t>(worker)];
     for (int frame = 0; frame < o.frames; ++frame) {
+      const double cpu_begin = ThreadCpuSeconds();
+      Clock::duration matrix{}, skinning{}, output{};
       for (size_t c = begin; c < end; ++c) {
         Instance& instance = crowd[c];
         const CharacterType& type = types[static_cast<size_t>(instance.type)];
         const Ladder& drawn = type.ladders[static_cast<size_t>(std::max(ladder, 0))];
-        const double t0 = ThreadCpuSeconds();
+        const Clock::time_point t0 = Clock::now();
         const int level =
             ladder >= 0 ? drawn.selector->Choose(PixelHeightAt(instance.distance_m), instance.level)
                         : 0;
@@ -314,7 +339,7 @@ RunResult RunCrowd(const std::vector<CharacterType>& types, std::vector<Instance
                                     view.kept_count() * proto::kMatrixFloats);
         if (!client::PlayFrame(drawn.level_set, view, clip, t, slot).ok()) std::abort();  // a bug
         mine.matrix_bytes += slot.size_bytes();
-        const double t1 = ThreadCpuSeconds();
+        const Clock::time_point t1 = Clock::now();
         const LevelSkin& skin = drawn.skins[static_cast<size_t>(level)];
         const size_t floats = 3 * size_t{skin.vertex_count()};
         const SkinFrameJob job{&skin,
@@ -323,14 +348,22 @@ RunResult RunCrowd(const std::vector<CharacterType>& types, std::vector<Instance
                                {scratch_positions.data(), floats},
                                {scratch_normals.data(), floats}};
         if (!job.Run().ok()) std::abort();  // shapes are fixed at set-up: a bug
-        const double t2 = ThreadCpuSeconds();
+        const Clock::time_point t2 = Clock::now();
         float* out = vertex_buffer.data() + instance.vertex_offset * 6;
         std::memcpy(out, scratch_positions.data(), floats * sizeof(float));
         std::memcpy(out + floats, scratch_normals.data(), floats * sizeof(float));
-        const double t3 = ThreadCpuSeconds();
-        mine.matrix_s += t1 - t0;
-        mine.skinning_s += t2 - t1;
-        mine.output_s += t3 - t2;
+        const Clock::time_point t3 = Clock::now();
+        matrix += t1 - t0;
+        skinning += t2 - t1;
+        output += t3 - t2;
+      }
+      // The frame's CPU time, split between the phases as their clock times are.
+      const double cpu = ThreadCpuSeconds() - cpu_begin;
+      const double timed = std::chrono::duration<double>(matrix + skinning + output).count();
+      if (timed > 0) {
+        mine.matrix_s += cpu * std::chrono::duration<double>(matrix).count() / timed;
+        mine.skinning_s += cpu * std::chrono::duration<double>(skinning).count() / timed;
+        mine.output_s += cpu * std::chrono::duration<double>(output).count() / timed;
       }
       frame_end.arrive_and_wait();
     }
@@ -449,6 +482,124 @@ Quality MeasureQuality(const std::vector<CharacterType>& types, std::vector<Inst
   return quality;
 }
 
+// The cost model's constants (pipeline/cost_levels.h) as this machine's skinner measures
+// them, on the crowd's mesh with the most influences: its vertices kept to their k heaviest
+// influences (k = 1 to 4, weights renormalised), drawn whole and as its first vertex alone
+// (skinning and output, medians of many runs); then one level of every character's ladder playing 8
+// frames of matrices, stored or interpolated. Printed per vertex, per joint and per draw in
+// ns, and in units of one influence's blend.
+void FitCostModel(const std::vector<CharacterType>& types, nlohmann::json& report) {
+  constexpr int kRepetitions = 51;
+  constexpr size_t kFewVertices = 1;
+  auto median = [](std::vector<double> v) {
+    std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+    return v[v.size() / 2];
+  };
+  const CharacterType& largest = *std::max_element(
+      types.begin(), types.end(), [](const CharacterType& a, const CharacterType& b) {
+        return a.mesh.influence_joints.size() < b.mesh.influence_joints.size();
+      });
+  const SkinMesh& mesh = largest.mesh;
+  const size_t p = mesh.positions.size() / 3;
+  const uint32_t n = largest.ladders.front().level_set.joint_count();
+  std::vector<uint16_t> identity(n);
+  for (uint32_t j = 0; j < n; ++j) identity[j] = static_cast<uint16_t>(j);
+  std::vector<float> palette(n * proto::kMatrixFloats, 0.0f);
+  for (uint32_t j = 0; j < n; ++j) palette[j * 12] = palette[j * 12 + 5] = palette[j * 12 + 10] = 1;
+  std::vector<float> positions(3 * p), normals(3 * p), output(6 * p);
+  // Per k: ns per vertex (the slope between the two sizes), the mean influences.
+  std::vector<std::array<double, 3>> per_k;  // k, influences, ns per vertex
+  double draw_ns = 0;
+  for (uint32_t k = 1; k <= 4; ++k) {
+    std::vector<uint32_t> offsets{0};
+    std::vector<int32_t> joints;
+    std::vector<float> weights;
+    for (size_t i = 0; i < p; ++i) {
+      std::vector<std::pair<float, int32_t>> entries;
+      for (uint32_t e = mesh.influence_offsets[i]; e < mesh.influence_offsets[i + 1]; ++e)
+        entries.emplace_back(mesh.influence_weights[e], mesh.influence_joints[e]);
+      std::sort(entries.rbegin(), entries.rend());
+      entries.resize(std::min<size_t>(entries.size(), k));
+      float sum = 0;
+      for (const auto& entry : entries) sum += entry.first;
+      for (const auto& [w, j] : entries) {
+        joints.push_back(j);
+        weights.push_back(entries.size() == 1 ? 1.0f : w / sum);
+      }
+      offsets.push_back(static_cast<uint32_t>(joints.size()));
+    }
+    double ns[2] = {0, 0}, influences = 0;
+    for (int size = 0; size < 2; ++size) {
+      const size_t v = size == 0 ? p : std::min(p, kFewVertices);
+      const SkinMesh part{mesh.positions.first(3 * v), mesh.normals.first(3 * v),
+                          std::span(offsets).first(v + 1), std::span(joints).first(offsets[v]),
+                          std::span(weights).first(offsets[v])};
+      auto skin = LevelSkin::Build(part, identity, n);
+      if (!skin.ok()) std::abort();  // built from a mesh that drew: a bug
+      if (size == 0) influences = skin->mean_influences();
+      std::vector<double> times;
+      for (int r = 0; r < kRepetitions; ++r) {
+        const Clock::time_point t0 = Clock::now();
+        const SkinFrameJob job{&*skin, palette, true, std::span(positions).first(3 * v),
+                               std::span(normals).first(3 * v)};
+        if (!job.Run().ok()) std::abort();
+        std::memcpy(output.data(), positions.data(), 3 * v * sizeof(float));
+        std::memcpy(output.data() + 3 * v, normals.data(), 3 * v * sizeof(float));
+        times.push_back(std::chrono::duration<double, std::nano>(Clock::now() - t0).count());
+      }
+      ns[size] = median(times);
+    }
+    const double few = static_cast<double>(std::min(p, kFewVertices));
+    const double slope = (ns[0] - ns[1]) / (static_cast<double>(p) - few);
+    per_k.push_back({double(k), influences, slope});
+    draw_ns += (ns[1] - few * slope) / 4;
+  }
+  // A vertex's cost a + b I from the blending path (k = 2 to 4).
+  double sx = 0, sy = 0, sxx = 0, sxy = 0;
+  for (size_t k = 1; k < per_k.size(); ++k) {
+    sx += per_k[k][1];
+    sy += per_k[k][2];
+    sxx += per_k[k][1] * per_k[k][1];
+    sxy += per_k[k][1] * per_k[k][2];
+  }
+  const double b = (3 * sxy - sx * sy) / (3 * sxx - sx * sx), a = (sy - b * sx) / 3;
+  // A joint: the matrix update of every level of every ladder, per joint.
+  double stored_ns = 0, interpolated_ns = 0, stored_joints = 0, interpolated_joints = 0;
+  for (const CharacterType& type : types) {
+    const Ladder& ladder = type.ladders.front();
+    for (const proto::LevelView& view : ladder.level_set.levels()) {
+      std::vector<float> matrices(view.kept_count() * proto::kMatrixFloats);
+      const uint32_t frames = std::min<uint32_t>(8, ladder.level_set.clip(0).frame_count);
+      std::vector<double> times;
+      for (int r = 0; r < kRepetitions; ++r) {
+        const Clock::time_point t0 = Clock::now();
+        for (uint32_t t = 0; t < frames; ++t) {
+          if (!client::PlayFrame(ladder.level_set, view, 0, t, matrices).ok()) std::abort();
+        }
+        times.push_back(std::chrono::duration<double, std::nano>(Clock::now() - t0).count() / frames);
+      }
+      (view.frame_stride() > 1 ? interpolated_ns : stored_ns) += median(times);
+      (view.frame_stride() > 1 ? interpolated_joints : stored_joints) += view.kept_count();
+    }
+  }
+  const double joint_ns = stored_ns / std::max(stored_joints, 1.0),
+               interpolated_joint_ns = interpolated_ns / std::max(interpolated_joints, 1.0);
+  std::printf("\nCost model on this machine (%s, %zu vertices): ns per vertex by influences",
+              largest.label.c_str(), p);
+  for (const auto& [k, influences, slope] : per_k)
+    std::printf("%s k=%.0f (%.2f) %.2f", k > 1 ? "," : "", k, influences, slope);
+  std::printf(
+      "; fit %.2f + %.2f per influence; a draw %.0f ns; a joint %.2f ns stored, %.2f ns "
+      "interpolated (with its draw's share). In influences: vertex %.2f, joint %.2f, "
+      "interpolated joint %.1f, draw %.0f\n",
+      a, b, draw_ns, joint_ns, interpolated_joint_ns, a / b, joint_ns / b,
+      interpolated_joint_ns / b, draw_ns / b);
+  report["cost_model"] = {{"vertex_ns", a},      {"influence_ns", b},
+                          {"draw_ns", draw_ns},  {"joint_ns", joint_ns},
+                          {"interpolated_joint_ns", interpolated_joint_ns},
+                          {"single_influence_vertex_ns", per_k.front()[2]}};
+}
+
 int Main(int argc, char** argv) {
   Options o;
   if (!ParseOptions(argc, argv, o)) return 2;
@@ -511,6 +662,8 @@ int Main(int argc, char** argv) {
                                     {"vertices", type.mesh.positions.size() / 3},
                                     {"levels", levels}});
   }
+
+  FitCostModel(types, report);
 
   std::printf(
       "\nScreen-space error against full detail (every %dth frame, every vertex of every "

@@ -97,6 +97,63 @@ TEST(ClientSkinner, SharedDataCharactersMatchCoreSkinning) {
   ExpectSkinnerMatchesCore(BakeInProcess(orc, "", {43, 20, 8}, core::Variant::kVPNOPD));
 }
 
+// A mesh bound one joint per vertex with weight 1 (what a level capped at one influence
+// draws) takes the skinner's path without a blend; it poses every vertex as the blending
+// path does, which the same mesh takes once one vertex carries a second, zero-weight entry.
+TEST(ClientSkinner, OneInfluencePerVertexPosesAsTheBlendDoes) {
+  for (core::Variant variant : {core::Variant::kVPNOPD, core::Variant::kVPNO}) {
+    const Baked baked = BakeInProcess(SourcePath("samples/Rig_Medium_MovementBasic.glb"),
+                                      "Walking_A", {23, 8}, variant);
+    ASSERT_NE(baked.character, nullptr);
+    const core::RawSkin& raw = baked.character->skin();
+    const size_t p = raw.positions.size();
+    std::vector<uint32_t> offsets{0};
+    std::vector<int32_t> joints;
+    for (size_t i = 0; i < p; ++i) {  // each vertex's heaviest joint
+      uint32_t heaviest = raw.influence_offsets[i];
+      for (uint32_t e = heaviest; e < raw.influence_offsets[i + 1]; ++e) {
+        if (raw.influence_weights[e] > raw.influence_weights[heaviest]) heaviest = e;
+      }
+      joints.push_back(raw.influence_joints[heaviest]);
+      offsets.push_back(static_cast<uint32_t>(joints.size()));
+    }
+    std::vector<float> ones(p, 1.0f);
+    const SkinMesh mesh = MeshOf(*baked.character);
+    const SkinMesh bound{mesh.positions, mesh.normals, offsets, joints, ones};
+    std::vector<uint32_t> blend_offsets = offsets;
+    for (size_t i = 1; i <= p; ++i) ++blend_offsets[i];
+    std::vector<float> blend_weights = ones;
+    blend_weights.insert(blend_weights.begin() + 1, 0.0f);
+    for (const proto::LevelView& level : baked.view.levels()) {
+      // Vertex 0's second entry: a joint on another slot of this level.
+      const std::span<const uint16_t> map = level.joint_map();
+      int32_t other = 0;
+      while (map[static_cast<size_t>(other)] == map[static_cast<size_t>(joints[0])]) ++other;
+      std::vector<int32_t> blend_joints = joints;
+      blend_joints.insert(blend_joints.begin() + 1, other);
+      const SkinMesh blended{mesh.positions, mesh.normals, blend_offsets, blend_joints,
+                             blend_weights};
+      auto one = LevelSkin::Build(bound, level.joint_map(), level.kept_count());
+      auto two = LevelSkin::Build(blended, level.joint_map(), level.kept_count());
+      ASSERT_TRUE(one.ok() && two.ok());
+      EXPECT_DOUBLE_EQ(one->mean_influences(), 1.0);
+      EXPECT_GT(two->mean_influences(), 1.0);
+      std::vector<float> one_positions(3 * p), one_normals(3 * p), two_positions(3 * p),
+          two_normals(3 * p);
+      const uint32_t t = level.frame_count() / 2;
+      ASSERT_TRUE((SkinFrameJob{&*one, level.frame(t), baked.view.rigid(), one_positions, one_normals}.Run().ok()));
+      ASSERT_TRUE((SkinFrameJob{&*two, level.frame(t), baked.view.rigid(), two_positions, two_normals}.Run().ok()));
+      double worst_position = 0, worst_normal = 0;
+      for (size_t c = 3; c < 3 * p; ++c) {  // vertex 0 blends a second slot at weight 0
+        worst_position = std::max(worst_position, double(std::abs(one_positions[c] - two_positions[c])));
+        worst_normal = std::max(worst_normal, double(std::abs(one_normals[c] - two_normals[c])));
+      }
+      EXPECT_EQ(worst_position, 0.0) << core::VariantName(variant);
+      EXPECT_LT(worst_normal, 1e-5) << core::VariantName(variant);  // rotations in float
+    }
+  }
+}
+
 TEST(ClientSkinner, RejectsMismatchedShapesAndTouchesNothing) {
   const float positions[] = {0, 0, 0, 1, 0, 0};
   const float normals[] = {0, 0, 1, 0, 0, 1};

@@ -112,6 +112,25 @@ TEST_F(Cli, BakesTheSampleWithTheDefaultLadder) {
   EXPECT_NE(svg.find("vpno+pd"), std::string::npos);
 }
 
+// --heights: the levels by cost for the heights asked, each within 1 px at its height.
+TEST_F(Cli, BakesTheLevelsForTheHeightsAsked) {
+  const fs::path out = dir_ / "out";
+  const ProcessResult bake = Exec("bake " + Sample() +
+                                  " --threads 2 --animation Walking_A --heights 60,24 --out " +
+                                  out.string());
+  ASSERT_EQ(bake.exit_code, 0) << bake.output;
+  const nlohmann::json levels = nlohmann::json::parse(ReadAll(out / "report.json"))["levels"];
+  ASSERT_EQ(levels.size(), 3u) << "full detail, then one level per height";
+  EXPECT_EQ(levels[0]["cost"].get<double>(), 1.0);
+  const double heights[] = {60, 24};
+  for (size_t l = 1; l < levels.size(); ++l) {
+    EXPECT_LT(levels[l]["cost"].get<double>(), levels[l - 1]["cost"].get<double>());
+    EXPECT_LE(levels[l]["max_vertex_error_pct"].get<double>(), 100.0 / heights[l - 1]);
+    EXPECT_GE(levels[l]["max_px_for_1px_error"].get<double>(), heights[l - 1]);
+  }
+  EXPECT_LT(levels[2]["vertices"].get<int>(), levels[0]["vertices"].get<int>());
+}
+
 // Both machine versions of the hot loops (core/simd.h) bake the same levels: the figures
 // agree to the rounding of fused multiply-adds. On a CPU without AVX2 and FMA both runs
 // are the baseline version.
@@ -211,6 +230,9 @@ TEST_F(Cli, BadInputExitsWithTwoAndWritesNothing) {
       {"bake " + Sample() + " --lock NoSuchJoint --out " + out.string(), "NoSuchJoint"},
       {"bake " + Sample() + " --fps -3 --out " + out.string(), "fps"},
       {"bake " + Sample() + " --threads 100000 --out " + out.string(), "threads must be in [0, 256]"},
+      {"bake " + Sample() + " --heights 50,400 --out " + out.string(), "ladder heights must decrease"},
+      {"bake " + Sample() + " --heights 0.5 --out " + out.string(), "ladder heights must decrease"},
+      {"bake " + Sample() + " --heights 50 --levels 10 --out " + out.string(), "excludes"},
       {"bake " + Sample(), "--out"},
       {"plot " + truncated.string() + " -o " + (dir_ / "x.svg").string(), "not valid JSON"},
   };
