@@ -6,6 +6,7 @@
 #include <limits>
 #include <memory>
 #include <nlohmann/json.hpp>
+#include <numeric>
 #include <vector>
 
 #include "core/polar.h"
@@ -168,7 +169,71 @@ Status CheckLevel(const core::Character& character, const GltfLevel& level) {
   for (float value : level.matrices) {
     if (!std::isfinite(value)) return InvalidArgument("the level has a non-finite matrix");
   }
+  const size_t p = character.skin().positions.size();
+  if (level.vertices.empty() != level.triangles.empty()) {
+    return InvalidArgument("a level's own mesh has both vertices and triangles");
+  }
+  for (size_t v = 0; v < level.vertices.size(); ++v) {
+    if (level.vertices[v] >= p || (v > 0 && level.vertices[v] <= level.vertices[v - 1])) {
+      return InvalidArgument("the level's vertices must be ascending vertex ids below " +
+                             std::to_string(p));
+    }
+  }
+  const size_t count = level.vertices.empty() ? p : level.vertices.size();
+  if (level.triangles.size() % 3 != 0 ||
+      std::any_of(level.triangles.begin(), level.triangles.end(),
+                  [&](uint32_t index) { return index >= count; })) {
+    return InvalidArgument("the level's triangles must be triples of indices below its " +
+                           std::to_string(count) + " vertices");
+  }
+  const size_t k = level.influences_per_vertex;
+  if (level.influence_slots.size() != count * k || level.influence_weights.size() != count * k) {
+    return InvalidArgument("the level's influences must be " + std::to_string(k) +
+                           " slots and weights per vertex");
+  }
+  for (size_t e = 0; e < level.influence_slots.size(); ++e) {
+    if (level.influence_slots[e] >= m || !(level.influence_weights[e] >= 0) ||
+        !std::isfinite(level.influence_weights[e])) {
+      return InvalidArgument("the level's influence " + std::to_string(e) +
+                             " has a slot out of range or a bad weight");
+    }
+  }
   return Status::Ok();
+}
+
+// The level's vertices' influences on its slots, in compressed rows: its own, or the
+// character's merged through the reduced skeleton. kInvalidArgument for a vertex left
+// with no weight.
+StatusOr<core::ReducedInfluences> LevelInfluences(const core::RawSkin& skin,
+                                                  const core::ReducedSkeleton& reduced,
+                                                  const GltfLevel& level,
+                                                  std::span<const uint32_t> vertex_ids) {
+  core::ReducedInfluences out;
+  out.offsets.push_back(0);
+  const core::ReducedInfluences merged =
+      level.influences_per_vertex == 0 ? core::ReduceInfluences(skin, reduced)
+                                       : core::ReducedInfluences{};
+  for (size_t v = 0; v < vertex_ids.size(); ++v) {
+    if (level.influences_per_vertex > 0) {
+      for (size_t e = v * level.influences_per_vertex; e < (v + 1) * level.influences_per_vertex;
+           ++e) {
+        if (level.influence_weights[e] == 0) continue;
+        out.slots.push_back(level.influence_slots[e]);
+        out.weights.push_back(level.influence_weights[e]);
+      }
+    } else {
+      const uint32_t i = vertex_ids[v];
+      out.slots.insert(out.slots.end(), merged.slots.begin() + merged.offsets[i],
+                       merged.slots.begin() + merged.offsets[i + 1]);
+      out.weights.insert(out.weights.end(), merged.weights.begin() + merged.offsets[i],
+                         merged.weights.begin() + merged.offsets[i + 1]);
+    }
+    if (out.slots.size() == out.offsets.back()) {
+      return InvalidArgument("the level's vertex " + std::to_string(v) + " has no weight");
+    }
+    out.offsets.push_back(static_cast<uint32_t>(out.slots.size()));
+  }
+  return out;
 }
 
 // K'_s(t) of the level as a double 3x4 matrix.
@@ -226,8 +291,14 @@ StatusOr<GltfExport> ExportLevelGlb(const core::Character& character, const Gltf
   const core::RawSkin& skin = character.skin();
   const size_t n = skeleton.parents.size();
   const size_t m = level.kept_joints.size();
-  const size_t p = skin.positions.size();
   const uint32_t frames = level.frame_count;
+  // The character's vertex of each of the level's.
+  std::vector<uint32_t> vertex_ids(level.vertices.begin(), level.vertices.end());
+  if (vertex_ids.empty()) {
+    vertex_ids.resize(skin.positions.size());
+    std::iota(vertex_ids.begin(), vertex_ids.end(), 0u);
+  }
+  const size_t p = vertex_ids.size();
 
   std::unique_ptr<bool[]> keep(new bool[n]());
   for (uint16_t j : level.kept_joints) keep[j] = true;
@@ -312,7 +383,9 @@ StatusOr<GltfExport> ExportLevelGlb(const core::Character& character, const Gltf
     }
   }
 
-  const core::ReducedInfluences influences = core::ReduceInfluences(skin, *reduced);
+  auto level_influences = LevelInfluences(skin, *reduced, level, vertex_ids);
+  if (!level_influences.ok()) return level_influences.status();
+  const core::ReducedInfluences& influences = *level_influences;
   const VertexInfluences top = TopInfluences(influences, stats);
 
   double max_deviation = 0;
@@ -320,7 +393,7 @@ StatusOr<GltfExport> ExportLevelGlb(const core::Character& character, const Gltf
     const core::Affine34d* exported = joint_matrices.data() + size_t{t} * m;
     const core::Affine34d* solved = level_matrices.data() + size_t{t} * m;
     for (size_t i = 0; i < p; ++i) {
-      const Eigen::Vector3d v0 = skin.positions[i].cast<double>();
+      const Eigen::Vector3d v0 = skin.positions[vertex_ids[i]].cast<double>();
       Eigen::Vector3d v_exported = Eigen::Vector3d::Zero(), v_level = Eigen::Vector3d::Zero();
       for (int q = 0; q < kGltfMaxInfluences; ++q) {
         const float w = top.weights[i * kGltfMaxInfluences + q];
@@ -343,18 +416,20 @@ StatusOr<GltfExport> ExportLevelGlb(const core::Character& character, const Gltf
   // Mesh.
   std::vector<float> positions(p * 3), normals(p * 3);
   for (size_t i = 0; i < p; ++i) {
-    Eigen::Vector3f normal = skin.normals[i];
+    Eigen::Vector3f normal = skin.normals[vertex_ids[i]];
     // The specification wants unit normals; a degenerate one gets an arbitrary unit axis.
     normal = normal.norm() > 1e-12f ? normal.normalized() : Eigen::Vector3f::UnitZ();
     for (int c = 0; c < 3; ++c) {
-      positions[i * 3 + c] = skin.positions[i][c];
+      positions[i * 3 + c] = skin.positions[vertex_ids[i]][c];
       normals[i * 3 + c] = normal[c];
     }
   }
-  std::vector<uint32_t> indices;
-  indices.reserve(skin.triangles.size() * 3);
-  for (const auto& triangle : skin.triangles)
-    indices.insert(indices.end(), triangle.begin(), triangle.end());
+  std::vector<uint32_t> indices(level.triangles.begin(), level.triangles.end());
+  if (level.vertices.empty()) {
+    indices.reserve(skin.triangles.size() * 3);
+    for (const auto& triangle : skin.triangles)
+      indices.insert(indices.end(), triangle.begin(), triangle.end());
+  }
   json attributes = {
       {"POSITION", glb.AddFloats(positions, 3, "VEC3", kArrayBuffer, true)},
       {"NORMAL", glb.AddFloats(normals, 3, "VEC3", kArrayBuffer)},

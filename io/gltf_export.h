@@ -12,9 +12,10 @@
 //  * joint node s rests at B_s, the rigid part of its bind matrix M0 (translation of M0,
 //    rotation nearest M0's 3x3): its inverse bind matrix is B_s^-1, so that the joint
 //    matrix glTF skins with, world_s(t) * B_s^-1, is K'_s(t) when world_s(t) = K'_s(t) B_s;
-//  * one mesh with POSITION, NORMAL, JOINTS_0 / WEIGHTS_0 and triangles: the reduced
-//    influences w' (core::ReduceInfluences), at most 4 per vertex as every loader reads:
-//    the 4 largest, renormalised to sum 1 (kGltfMaxInfluences);
+//  * one mesh with POSITION, NORMAL, JOINTS_0 / WEIGHTS_0 and triangles: the level's own
+//    vertices, triangles and influences where it has them, else the character's with the
+//    reduced influences w' (core::ReduceInfluences); at most 4 per vertex as every loader
+//    reads: the 4 largest, renormalised to sum 1 (kGltfMaxInfluences);
 //  * one animation, LINEAR, one key per frame at t / fps seconds: translation and rotation
 //    of every joint node, local to its parent node; scale only when the level is not rigid.
 //    Local transforms are taken top-down relative to the parent's *realised* world matrix,
@@ -47,6 +48,15 @@ struct GltfLevel {
   double fps = 30.0;           // > 0
   bool rigid = false;          // every K' is a rotation plus a translation (exports no scale)
   std::string animation_name;  // glTF animation name; may be empty
+  // The level's own mesh (level format 3.0): the character's vertices it draws (ids,
+  // ascending) and its triangles, 3 indices into those; both empty: the whole mesh.
+  std::span<const uint32_t> vertices = {};
+  std::span<const uint32_t> triangles = {};
+  // The level's own influences, influences_per_vertex (k) slots and weights per level
+  // vertex (zero weights unused); k = 0: the character's, merged through the joint map.
+  uint32_t influences_per_vertex = 0;
+  std::span<const uint16_t> influence_slots = {};
+  std::span<const float> influence_weights = {};
 };
 
 // Influences per vertex in JOINTS_0 / WEIGHTS_0: the one set every glTF loader reads.
@@ -56,7 +66,7 @@ inline constexpr int kGltfMaxInfluences = 4;
 // height (core::Character::height()).
 struct GltfExportStats {
   int joints = 0;    // m
-  int vertices = 0;  // p
+  int vertices = 0;  // the level's (p when it draws the whole mesh)
   int frames = 0;    // T
   // Vertices that had more than kGltfMaxInfluences reduced influences, and the largest weight
   // sum dropped from one vertex (before renormalising).
@@ -75,9 +85,10 @@ struct GltfExport {
 };
 
 // Errors: kInvalidArgument when the level does not belong to the character (joint count or
-// names differ, kept joints or joint map inconsistent with the skeleton), when a shape is
-// wrong (matrices not T x m x 12, frame_count or fps out of range), or when a matrix is
-// not finite or singular.
+// names differ, kept joints or joint map inconsistent with the skeleton, a vertex the
+// character does not have), when a shape is wrong (matrices not T x m x 12, frame_count or
+// fps out of range, triangles or influences not matching the level's vertices), when an
+// index, slot or weight is out of range, or when a matrix is not finite or singular.
 StatusOr<GltfExport> ExportLevelGlb(const core::Character& character, const GltfLevel& level);
 
 }  // namespace motionlod::io

@@ -11,18 +11,25 @@
 namespace motionlod::pipeline {
 
 StatusOr<io::GltfExport> ExportLevelGltf(const io::Asset& character, std::string_view level_set,
-                                         int joints, const std::string& clip_name) {
+                                         const LevelPick& pick, const std::string& clip_name) {
   const proto::AlignedBytes aligned = proto::AlignedBytes::CopyOf(level_set);
   auto view = proto::DecodeLevelSet(aligned.bytes());
   if (!view.ok()) return view.status();
   const proto::LevelView* chosen = nullptr;
   std::string available;
   for (const proto::LevelView& level : view->levels()) {
-    if (chosen == nullptr && static_cast<int>(level.kept_count()) == joints) chosen = &level;
+    if (chosen == nullptr && pick.index < 0 && static_cast<int>(level.kept_count()) == pick.joints)
+      chosen = &level;
     available += (available.empty() ? "" : ", ") + std::to_string(level.kept_count());
   }
+  if (pick.index >= 0 && static_cast<uint32_t>(pick.index) < view->level_count())
+    chosen = &view->level(static_cast<uint32_t>(pick.index));
+  if (chosen == nullptr && pick.index >= 0) {
+    return InvalidArgument("no level " + std::to_string(pick.index) + "; the level set has " +
+                           std::to_string(view->level_count()) + " (0 is the finest)");
+  }
   if (chosen == nullptr) {
-    return InvalidArgument("no level keeps " + std::to_string(joints) +
+    return InvalidArgument("no level keeps " + std::to_string(pick.joints) +
                            " joints; the levels keep " + available);
   }
   // The clip: by name, the first where none is named, or the one unnamed clip of a level
@@ -61,6 +68,11 @@ StatusOr<io::GltfExport> ExportLevelGltf(const io::Asset& character, std::string
       .fps = chosen_clip.fps,
       .rigid = view->rigid(),
       .animation_name = chosen_clip.name.empty() ? clip_name : std::string(chosen_clip.name),
+      .vertices = chosen->vertices(),
+      .triangles = chosen->triangles(),
+      .influences_per_vertex = chosen->influences_per_vertex(),
+      .influence_slots = chosen->influence_slots(),
+      .influence_weights = chosen->influence_weights(),
   };
   return io::ExportLevelGlb(**built, level);
 }

@@ -11,15 +11,23 @@
 
 namespace motionlod::pipeline {
 
-// The level of `level_set` (a level-set file, or a one-level file) that keeps `joints`
-// joints, skinning `character` (the asset the level set was baked for), as a .glb with
-// one animation: the clip named `clip_name` ("" = the first), called after it. A level
-// set of one unnamed clip (format 1.0) plays that clip under the given name. Errors:
-// kInvalidArgument (no level keeps that many joints: the message lists those that exist;
-// the level set belongs to another character), kNotFound (no such clip: the message lists
-// them), kDataLoss (the level set does not decode), and the importer's and the exporter's
-// errors.
+// Which level of a level set: by index (finest first), or the finest that keeps `joints`
+// joints.
+struct LevelPick {
+  int index = -1;  // >= 0: this level
+  int joints = 0;  // else: the finest level keeping this many
+};
+
+// The level of `level_set` (a level-set file, or a one-level file) that `pick` names,
+// skinning `character` (the asset the level set was baked for) with the level's own mesh
+// and influences where it has them, as a .glb with one animation: the clip named
+// `clip_name` ("" = the first), called after it, every frame (poses between stored ones
+// interpolated as a player does). A level set of one unnamed clip (format 1.0) plays that
+// clip under the given name. Errors: kInvalidArgument (no such level: the message lists
+// those that exist; the level set belongs to another character), kNotFound (no such clip:
+// the message lists them), kDataLoss (the level set does not decode), and the importer's
+// and the exporter's errors.
 StatusOr<io::GltfExport> ExportLevelGltf(const io::Asset& character, std::string_view level_set,
-                                         int joints, const std::string& clip_name);
+                                         const LevelPick& pick, const std::string& clip_name);
 
 }  // namespace motionlod::pipeline

@@ -227,7 +227,7 @@ Result<BakeRecord> Levels::BakeWithLevels(const std::string& bake_id) {
   return bake;
 }
 
-Result<Levels::GltfFile> Levels::GetGltf(const std::string& bake_id, int joints,
+Result<Levels::GltfFile> Levels::GetGltf(const std::string& bake_id, const GltfPick& pick,
                                          const std::string& clip) {
   auto bake = BakeWithLevels(bake_id);
   if (!bake.ok()) return bake.error();
@@ -236,13 +236,18 @@ Result<Levels::GltfFile> Levels::GetGltf(const std::string& bake_id, int joints,
   const LevelRecord* level = nullptr;
   std::string available;
   for (const LevelRecord& record : *levels) {
-    if (level == nullptr && record.joints == joints) level = &record;
+    const bool named = pick.hash.empty() ? record.joints == pick.joints : record.hash == pick.hash;
+    if (level == nullptr && named) level = &record;
     available += (available.empty() ? "" : ", ") + std::to_string(record.joints);
+  }
+  if (level == nullptr && !pick.hash.empty()) {
+    return Error(ErrorKind::kNotFound,
+                 "bake " + bake_id + " has no level " + pick.hash + "; its level table lists them");
   }
   if (level == nullptr) {
     return Error(ErrorKind::kNotFound, "bake " + bake_id + " has no level with " +
-                                           std::to_string(joints) + " joints; its levels keep " +
-                                           available);
+                                           std::to_string(pick.joints) +
+                                           " joints; its levels keep " + available);
   }
   auto table = GetTable(bake.value());
   if (!table.ok()) return Internal(table.status());
@@ -255,7 +260,7 @@ Result<Levels::GltfFile> Levels::GetGltf(const std::string& bake_id, int joints,
   GltfFile file;
   // The version after "motionlod-gltf/" changes whenever the exporter writes other bytes.
   file.key =
-      io::Sha256Hex("motionlod-gltf/1\nlevel " + level->hash + "\ncharacter " + bake->character_id +
+      io::Sha256Hex("motionlod-gltf/2\nlevel " + level->hash + "\ncharacter " + bake->character_id +
                     "\nanimation " + std::to_string(animation.size()) + ":" + animation + "\n");
   if ((file.glb = context_.cache.Get(file.key))) return file;
   auto one_level = Get(level->hash, "");
@@ -265,7 +270,7 @@ Result<Levels::GltfFile> Levels::GetGltf(const std::string& bake_id, int joints,
   if (!character.ok()) return character.error();
   auto asset = context_.LoadSource(character->id, character->files);
   if (!asset.ok()) return Internal(asset.status());
-  auto exported = pipeline::ExportLevelGltf(**asset, *one_level->bytes, joints, animation);
+  auto exported = pipeline::ExportLevelGltf(**asset, *one_level->bytes, {.index = 0}, animation);
   if (!exported.ok()) return Internal(exported.status());
   file.glb = std::make_shared<const std::string>(std::move(exported->glb));
   context_.cache.Put(file.key, file.glb);

@@ -38,15 +38,20 @@ class Levels {
   // it once and then cached under `key`. 404 naming the level's clips for an unknown clip.
   Result<LevelFile> Get(const std::string& hash, const std::string& clip);
 
-  // The level of a bake that keeps `joints` joints as glTF 2.0 binary (docs/EXPORT.md),
-  // playing the clip of that name ("" = the first), exported from the stored character on
-  // the first request and then served from the level cache under `key`, the SHA-256 of
-  // what it is made of (an ETag).
+  // A level of a bake as glTF 2.0 binary (docs/EXPORT.md): the level whose one-level file
+  // is `hash`, or else the finest that keeps `joints` joints; playing the clip of that name
+  // ("" = the first), exported from the stored character on the first request and then
+  // served from the level cache under `key`, the SHA-256 of what it is made of (an ETag).
+  struct GltfPick {
+    int joints = 0;
+    std::string hash;
+  };
   struct GltfFile {
     LevelCache::Bytes glb;
     std::string key;
   };
-  Result<GltfFile> GetGltf(const std::string& bake_id, int joints, const std::string& clip);
+  Result<GltfFile> GetGltf(const std::string& bake_id, const GltfPick& pick,
+                           const std::string& clip);
 
   struct Table {
     std::vector<double> max_error_fraction;  // finest first

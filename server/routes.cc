@@ -611,17 +611,22 @@ http::Router MakeRouter(const RouteContext& context) {
       [&levels](Request& request, Response& response) {
         constexpr std::string_view kSuffix = ".glb";
         const std::string_view file = request.path_params[1];
-        const std::optional<uint64_t> joints =
-            file.ends_with(kSuffix) ? ParseUnsigned(file.substr(0, file.size() - kSuffix.size()))
-                                    : std::nullopt;
-        if (!joints || *joints == 0 || *joints > 65535) {
-          return http::SetProblem(
-              request, response, 404,
-              "a level is exported as /v1/bakes/{id}/levels/{joints}.glb, joints its kept count");
+        const std::string_view stem =
+            file.ends_with(kSuffix) ? file.substr(0, file.size() - kSuffix.size()) : "";
+        Levels::GltfPick pick;
+        if (proto::api::IsContentId(stem)) {
+          pick.hash = stem;
+        } else if (const std::optional<uint64_t> joints = ParseUnsigned(stem);
+                   joints && *joints > 0 && *joints <= 65535) {
+          pick.joints = static_cast<int>(*joints);
+        } else {
+          return http::SetProblem(request, response, 404,
+                                  "a level is exported as /v1/bakes/{id}/levels/{joints}.glb "
+                                  "(joints its kept count) or /v1/bakes/{id}/levels/{hash}.glb");
         }
         std::string clip;
         if (!ReadClip(request, response, clip)) return;
-        auto gltf = levels.GetGltf(request.path_params[0], static_cast<int>(*joints), clip);
+        auto gltf = levels.GetGltf(request.path_params[0], pick, clip);
         if (!gltf.ok()) return Fail(request, response, gltf.error());
         const std::string etag = "\"" + gltf->key + "\"";
         response.SetHeader("ETag", etag);

@@ -66,6 +66,11 @@ fs::path Sibling(const fs::path& target, const char* tag) {
 }  // namespace
 
 Status WriteFileAtomically(const fs::path& path, const std::string& contents) {
+  if (const fs::path parent = path.parent_path(); !parent.empty()) {  // as `bake` makes its DIR
+    std::error_code error;
+    fs::create_directories(parent, error);
+    if (error) return InvalidArgument("cannot create " + Quote(parent) + ": " + error.message());
+  }
   const fs::path temp = Sibling(path, "partial");
   if (Status status = WriteAndSync(temp, contents); !status.ok()) {
     std::error_code ignored;

@@ -16,7 +16,8 @@ namespace motionlod::tools {
 Status WriteDirectoryAtomically(const std::filesystem::path& dir,
                                 const std::vector<std::pair<std::string, std::string>>& files);
 
-// One file, written to a sibling temporary file, flushed, then renamed over `path`.
+// One file, written to a sibling temporary file, flushed, then renamed over `path`; its
+// directory is created when missing.
 Status WriteFileAtomically(const std::filesystem::path& path, const std::string& contents);
 
 }  // namespace motionlod::tools

@@ -5,7 +5,8 @@
 //                  [--levels 30,20,10,5 | --all-levels | --heights 800,400,...]
 //                  [--variant vpno+pd] [--fps F] [--lock J,...] [--threads N] [--curves] --out DIR
 //   motionlod export CHARACTER [--motion M] [--animation NAME]... [--variant vpno+pd] [--fps F]
-//                    [--lock J,...] [--joints N] [--level-set DIR/levels.mlod] --out FILE.glb
+//                    [--lock J,...] [--joints N | --level-set DIR/levels.mlod [--level I]]
+//                    --out FILE.glb
 //   motionlod plot REPORT.json -o FIG.svg
 // Exit codes: 0 success, 2 bad input (usage, unreadable or invalid files, impossible
 // requests), 1 failure to write the output.
@@ -266,9 +267,10 @@ int RunBake(const CommonOptions& o, const BakeOptions& b) {
   return 0;
 }
 
-// Exports the level keeping `joints` joints (0 = all of them) as glTF: from the level set
-// at `level_set_path` when given, else from a bake of that single level.
-int RunExport(const CommonOptions& o, const std::string& variant, int joints,
+// Exports the level keeping `joints` joints (0 = all of them), or level `level_index` of
+// the level set (>= 0), as glTF: from the level set at `level_set_path` when given, else
+// from a bake of that single level.
+int RunExport(const CommonOptions& o, const std::string& variant, int joints, int level_index,
               const std::string& level_set_path, const std::string& out) {
   auto parsed_variant = core::ParseVariant(variant);
   if (!parsed_variant.ok()) return Fail(parsed_variant.status());
@@ -291,7 +293,8 @@ int RunExport(const CommonOptions& o, const std::string& variant, int joints,
     level_set = std::move(baked->level_set);
     animation = baked->report["clips"][0]["name"].get<std::string>();
   }
-  auto exported = pipeline::ExportLevelGltf(*request->character, level_set, joints, animation);
+  auto exported = pipeline::ExportLevelGltf(*request->character, level_set,
+                                            {.index = level_index, .joints = joints}, animation);
   if (!exported.ok()) {
     return Fail(Status(exported.status().code(),
                        (level_set_path.empty() ? "" : "'" + level_set_path + "': ") +
@@ -364,16 +367,24 @@ int Main(int argc, char** argv) {
 
   CommonOptions export_options;
   std::string export_variant = "vpno+pd", level_set_path, glb_path;
-  int export_joints = 0;
+  int export_joints = 0, export_level = -1;
   CLI::App* export_command =
       app.add_subcommand("export", "write one level as glTF 2.0 (.glb) with its animation");
   AddCommon(export_command, export_options);
   export_command->add_option("--variant", export_variant, "vp, vpno, vp+pd or vpno+pd (rigid)")
       ->capture_default_str();
-  export_command->add_option("--joints", export_joints, "kept joints of the level (default: all)")
-      ->check(CLI::PositiveNumber);
-  export_command->add_option("--level-set", level_set_path,
-                             "export from this baked levels.mlod instead of baking the level");
+  auto* joints_option =
+      export_command->add_option("--joints", export_joints, "kept joints of the level (default: all)")
+          ->check(CLI::PositiveNumber);
+  auto* level_set_option = export_command->add_option(
+      "--level-set", level_set_path, "export from this baked levels.mlod instead of baking the level");
+  export_command
+      ->add_option("--level", export_level,
+                   "the level of --level-set to export, 0 the finest (its own mesh, influences "
+                   "and pose rate)")
+      ->check(CLI::NonNegativeNumber)
+      ->needs(level_set_option)
+      ->excludes(joints_option);
   export_command->add_option("--out", glb_path, ".glb file to write")->required();
 
   std::string report_path, svg_path;
@@ -394,7 +405,8 @@ int Main(int argc, char** argv) {
     return RunBake(bake_options, bake_choices);
   }
   if (export_command->parsed()) {
-    return RunExport(export_options, export_variant, export_joints, level_set_path, glb_path);
+    return RunExport(export_options, export_variant, export_joints, export_level, level_set_path,
+                     glb_path);
   }
   return RunPlot(report_path, svg_path);
 }

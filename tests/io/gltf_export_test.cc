@@ -39,8 +39,14 @@ struct SolvedLevel {
   bool rigid = false;
 
   GltfLevel View() const {
-    return {joint_names, kept_joints, joint_map, matrices, static_cast<uint32_t>(frames),
-            fps,         rigid,       "test"};
+    return {.joint_names = joint_names,
+            .kept_joints = kept_joints,
+            .joint_map = joint_map,
+            .matrices = matrices,
+            .frame_count = static_cast<uint32_t>(frames),
+            .fps = fps,
+            .rigid = rigid,
+            .animation_name = "test"};
   }
   core::Affine34d K(int t, int s) const {
     core::Affine34d k;
@@ -241,7 +247,14 @@ TEST(GltfExport, WritesTheHandComputedPoseOfAReducedCreature) {
       for (int col = 0; col < 4; ++col) matrices.push_back(static_cast<float>(k(row, col)));
     }
   }
-  const GltfLevel level{names, kept, map, matrices, 2, 10.0, true, "turn"};
+  const GltfLevel level{.joint_names = names,
+                        .kept_joints = kept,
+                        .joint_map = map,
+                        .matrices = matrices,
+                        .frame_count = 2,
+                        .fps = 10.0,
+                        .rigid = true,
+                        .animation_name = "turn"};
   auto exported = ExportLevelGlb(*creature, level);
   ASSERT_TRUE(exported.ok()) << exported.status().ToString();
   EXPECT_LT(exported->stats.max_vertex_deviation_pct, 1e-4);

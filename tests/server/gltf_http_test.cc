@@ -1,4 +1,4 @@
-// GET /v1/bakes/{id}/levels/{joints}.glb on the real daemon: bakes of real characters at
+// GET /v1/bakes/{id}/levels/{joints|hash}.glb on the real daemon: bakes of real characters at
 // several levels and variants, exported over HTTP, checked by the Khronos glTF validator
 // and served again from the cache (ETag, 304); wrong counts and names answer 404.
 #include <gtest/gtest.h>
@@ -79,6 +79,38 @@ TEST_F(GltfExportHttp, ExportsLevelsThatTheGltfValidatorAccepts) {
     files.push_back(Fetch(orc, 10, false));
   }
   motionlod::testing::ExpectValidGltf(files);
+}
+
+// Levels by cost: several may keep the same joints, and each draws its own mesh. Each is
+// exported by its hash from the level table, with its own vertices and triangles.
+TEST_F(GltfExportHttp, ExportsEachLevelByCostByItsHash) {
+  const std::string bake =
+      Bake(SourcePath("samples/Rig_Medium_MovementBasic.glb"), {{"motion", "Walking_A"}});
+  auto info = client_->Get(("/v1/bakes/" + bake).c_str());
+  ASSERT_TRUE(info);
+  const json levels = Json(info)["levels"];
+  ASSERT_GE(levels.size(), 3u);
+  std::vector<fs::path> files;
+  for (const json& level : levels) {
+    const std::string url = "/v1/bakes/" + bake + "/levels/" + level["hash"].get<std::string>() + ".glb";
+    auto result = client_->Get(url.c_str());
+    ASSERT_TRUE(result);
+    ASSERT_EQ(result->status, 200) << url << ": " << result->body;
+    const nlohmann::json gltf = motionlod::testing::GlbJson(result->body);
+    ASSERT_TRUE(gltf.is_object()) << url;
+    const nlohmann::json& primitive = gltf["meshes"][0]["primitives"][0];
+    EXPECT_EQ(gltf["accessors"][primitive["attributes"]["POSITION"].get<int>()]["count"],
+              level["vertices"]);
+    EXPECT_EQ(gltf["accessors"][primitive["indices"].get<int>()]["count"].get<int>(),
+              3 * level["triangles"].get<int>());
+    EXPECT_EQ(gltf["skins"][0]["joints"].size(), level["joints"].get<size_t>());
+    files.push_back(daemon_->dir() / ("level-" + std::to_string(files.size()) + ".glb"));
+    std::ofstream(files.back(), std::ios::binary) << result->body;
+  }
+  EXPECT_LT(levels.back()["vertices"].get<int>(), levels.front()["vertices"].get<int>());
+  motionlod::testing::ExpectValidGltf(files);
+  ExpectProblem(client_->Get(("/v1/bakes/" + bake + "/levels/" + std::string(64, 'b') + ".glb").c_str()),
+                404, "has no level");
 }
 
 TEST_F(GltfExportHttp, IsCachedAndConditional) {

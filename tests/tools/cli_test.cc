@@ -312,6 +312,56 @@ TEST_F(Cli, ExportsALevelOfABakedLevelSet) {
   EXPECT_FALSE(fs::exists(dir_ / "five.glb"));
 }
 
+// Levels by cost carry their own mesh and influences: `--level I` exports them as they are
+// (the level's vertices and triangles, its influences), into a directory made for it.
+TEST_F(Cli, ExportsEachLevelByCostWithItsOwnMesh) {
+  const fs::path out = dir_ / "out";
+  const ProcessResult bake = Exec("bake " + Sample() +
+                                  " --threads 2 --animation Walking_A --heights 60,24 --out " +
+                                  out.string());
+  ASSERT_EQ(bake.exit_code, 0) << bake.output;
+  const nlohmann::json levels = nlohmann::json::parse(ReadAll(out / "report.json"))["levels"];
+  ASSERT_EQ(levels.size(), 3u);
+  const std::string from = " --level-set " + (out / "levels.mlod").string();
+  std::vector<fs::path> files;
+  for (size_t l = 0; l < levels.size(); ++l) {
+    const fs::path glb = dir_ / "made" / "here" / ("level" + std::to_string(l) + ".glb");
+    const ProcessResult run = Exec("export " + Sample() + from + " --level " + std::to_string(l) +
+                                   " --out " + glb.string());
+    ASSERT_EQ(run.exit_code, 0) << run.output;
+    const int joints = levels[l]["joints"].get<int>();
+    ExpectGltfLevel(glb, joints, true);
+    const nlohmann::json gltf = testing::GlbJson(ReadAll(glb));
+    const nlohmann::json& primitive = gltf["meshes"][0]["primitives"][0];
+    const nlohmann::json& accessors = gltf["accessors"];
+    EXPECT_EQ(accessors[primitive["attributes"]["POSITION"].get<int>()]["count"],
+              levels[l]["vertices"]);
+    EXPECT_EQ(accessors[primitive["attributes"]["JOINTS_0"].get<int>()]["count"],
+              levels[l]["vertices"]);
+    EXPECT_EQ(accessors[primitive["indices"].get<int>()]["count"].get<int>(),
+              3 * levels[l]["triangles"].get<int>());
+    EXPECT_NE(run.output.find(std::to_string(levels[l]["vertices"].get<int>()) + " vertices"),
+              std::string::npos)
+        << run.output;
+    files.push_back(glb);
+  }
+  EXPECT_LT(levels[2]["vertices"].get<int>(), levels[0]["vertices"].get<int>());
+  testing::ExpectValidGltf(files);
+
+  const ProcessResult missing =
+      Exec("export " + Sample() + from + " --level 3 --out " + (dir_ / "x.glb").string());
+  EXPECT_EQ(missing.exit_code, 2) << missing.output;
+  EXPECT_NE(missing.output.find("no level 3; the level set has 3"), std::string::npos)
+      << missing.output;
+  const ProcessResult both = Exec("export " + Sample() + from + " --level 1 --joints 9 --out " +
+                                  (dir_ / "x.glb").string());
+  EXPECT_EQ(both.exit_code, 2) << both.output;
+  const ProcessResult no_set =
+      Exec("export " + Sample() + " --level 1 --out " + (dir_ / "x.glb").string());
+  EXPECT_EQ(no_set.exit_code, 2) << no_set.output;
+  EXPECT_FALSE(fs::exists(dir_ / "x.glb"));
+}
+
 TEST_F(Cli, ExportBadInputExitsWithTwoAndWritesNothing) {
   const fs::path out = dir_ / "out";
   ASSERT_EQ(Exec("bake " + Sample() + " --threads 2 --levels 23 --out " + out.string()).exit_code,
