@@ -150,62 +150,36 @@ StatusOr<std::optional<CostLevel>> CheapestLevelJob::Run(TaskPool& pool) const {
     return job.Run(pool.Runner());
   };
 
-  // Every way of simplifying the mesh, then the original mesh (share 0).
-  std::vector<std::pair<double, core::SkinSplit>> meshes;
-  if (parts.vertices) {
-    for (core::SkinSplit split : {core::SkinSplit::kDominantJoint, core::SkinSplit::kWeightBands}) {
-      for (double share : kMeshShares) meshes.emplace_back(share, split);
-    }
-  }
-  meshes.emplace_back(0.0, core::SkinSplit::kNone);
+  // A candidate of `level`'s mesh (none: the whole) keeping `kept` joints, solved on
+  // `solve_on` (the character, or its subset on that mesh): the smallest cap, then the
+  // largest stride, whose probe fits; none where no cap fits.
   std::vector<Candidate> candidates;
-  for (const auto& [share, split] : meshes) {
-    CostLevel level;
-    std::shared_ptr<const core::PreparedMotion> solve_on = prepared;
-    if (share > 0) {
-      auto mesh = core::SimplifyMeshJob{&character, 1, share * budget_length, split}.Run();
-      if (!mesh.ok()) return mesh.status();
-      if (mesh->triangles.size() > kMostTrianglesKept * character.skin().triangles.size()) continue;
-      auto subset = core::SubsetCharacter(character, *mesh);
-      if (!subset.ok()) return subset.status();
-      auto made = core::PreparedMotion::Create(*subset, *motion, settings, simd, pool.Runner());
-      if (!made.ok()) return made.status();
-      solve_on = *std::move(made);
-      level.mesh = *std::move(mesh);
-    }
-    // The fewest joints whose solved error on the level's vertices fits the skeleton's share
-    // (bisection on probe frames), solved on every frame.
-    const double skeleton_pct = kSkeletonShare * (1 - share) * budget_pct;
-    const int most = std::clamp(max_joints, fewest, n);
-    auto count = core::SmallestLevelJob{solve_on.get(), ranking, parts.joints ? fewest : most, most,
-                                        skeleton_pct}
-                     .Run();
-    if (!count.ok()) return count.status();
-    auto skeleton = core::ReduceSkeletonToCount(solve_on->character(), *ranking, *count);
+  auto try_skeleton = [&](CostLevel level, const core::PreparedMotion& solve_on,
+                          int kept) -> Status {
+    auto skeleton = core::ReduceSkeletonToCount(solve_on.character(), *ranking, kept);
     if (!skeleton.ok()) return skeleton.status();
-    auto chosen = solve_on->SolveLevel(*skeleton);
+    auto chosen = solve_on.SolveLevel(*skeleton);
     if (!chosen.ok()) return chosen.status();
     level.skeleton = chosen->skeleton;
     // Cap 0: the mesh's influences merged through the joint map (none of the level's own).
     const std::vector<int> tried_caps = parts.influences ? caps : std::vector<int>{0};
     for (int cap : tried_caps) {
-      auto influences = cap == 0 ? core::TruncateInfluences(solve_on->character(), level.skeleton,
+      auto influences = cap == 0 ? core::TruncateInfluences(solve_on.character(), level.skeleton,
                                                             core::kMaxInfluencesPerVertex)
-                                 : core::InfluenceCapJob{solve_on.get(), &level.skeleton,
+                                 : core::InfluenceCapJob{&solve_on, &level.skeleton,
                                                          chosen->matrices, cap, normal_weight}
                                        .Run();
       if (!influences.ok()) return influences.status();
       std::vector<core::RowMajorAffine34f> matrices = chosen->matrices;
       if (!rigid && cap > 0) {  // affine levels: a matrix step, then the weights again
         auto stepped =
-            core::InfluenceMatrixJob{solve_on.get(), &level.skeleton, matrices,
-                                     &*influences,   normal_weight,   settings.regularization}
+            core::InfluenceMatrixJob{&solve_on,    &level.skeleton, matrices,
+                                     &*influences, normal_weight,   settings.regularization}
                 .Run();
         if (!stepped.ok()) return stepped.status();
         matrices = *std::move(stepped);
         influences =
-            core::InfluenceCapJob{solve_on.get(), &level.skeleton, matrices, cap, normal_weight}
-                .Run();
+            core::InfluenceCapJob{&solve_on, &level.skeleton, matrices, cap, normal_weight}.Run();
         if (!influences.ok()) return influences.status();
       }
       Candidate candidate{level, *std::move(influences)};
@@ -231,8 +205,47 @@ StatusOr<std::optional<CostLevel>> CheapestLevelJob::Run(TaskPool& pool) const {
                         best.level.mean_influences, cap == 1, best.level.skeleton.kept_count(),
                         best.level.frame_stride});
         candidates.push_back(std::move(best));
-        break;  // a larger cap costs more at the same vertices and joints
+        return Status::Ok();  // a larger cap costs more at the same vertices and joints
       }
+    }
+    return Status::Ok();
+  };
+
+  // Every way of simplifying the mesh, then the original mesh (share 0).
+  std::vector<std::pair<double, core::SkinSplit>> meshes;
+  if (parts.vertices) {
+    for (core::SkinSplit split : {core::SkinSplit::kDominantJoint, core::SkinSplit::kWeightBands}) {
+      for (double share : kMeshShares) meshes.emplace_back(share, split);
+    }
+  }
+  meshes.emplace_back(0.0, core::SkinSplit::kNone);
+  for (const auto& [share, split] : meshes) {
+    CostLevel level;
+    std::shared_ptr<const core::PreparedMotion> solve_on = prepared;
+    if (share > 0) {
+      auto mesh = core::SimplifyMeshJob{&character, 1, share * budget_length, split}.Run();
+      if (!mesh.ok()) return mesh.status();
+      if (mesh->triangles.size() > kMostTrianglesKept * character.skin().triangles.size()) continue;
+      auto subset = core::SubsetCharacter(character, *mesh);
+      if (!subset.ok()) return subset.status();
+      auto made = core::PreparedMotion::Create(*subset, *motion, settings, simd, pool.Runner());
+      if (!made.ok()) return made.status();
+      solve_on = *std::move(made);
+      level.mesh = *std::move(mesh);
+    }
+    // Two skeletons: the fewest joints whose solved error on the level's vertices fits the
+    // skeleton's share (bisection on probe frames), and every joint the finer level keeps
+    // (joints cost little: the rest of the budget may then go to the mesh and the rate).
+    const double skeleton_pct = kSkeletonShare * (1 - share) * budget_pct;
+    const int most = std::clamp(max_joints, fewest, n);
+    auto count = core::SmallestLevelJob{solve_on.get(), ranking, parts.joints ? fewest : most, most,
+                                        skeleton_pct}
+                     .Run();
+    if (!count.ok()) return count.status();
+    std::vector<int> counts = {*count};
+    if (most != *count) counts.push_back(most);
+    for (int kept : counts) {
+      if (Status status = try_skeleton(level, *solve_on, kept); !status.ok()) return status;
     }
   }
   std::sort(candidates.begin(), candidates.end(),
