@@ -294,6 +294,15 @@ StatusOr<std::vector<CostLevel>> CostLadderJob::Run(TaskPool& pool) const {
     // A coarser budget also admits every finer level: a new level only where it is cheaper.
     if (*found && (*found)->cost < ladder.back().cost) ladder.push_back(**std::move(found));
   }
+  // A level that a cheaper one after it matches in accuracy serves no height: dropped.
+  double coarser_error = std::numeric_limits<double>::infinity();
+  for (size_t l = ladder.size(); l-- > 1;) {
+    if (ladder[l].deviation.max_pct >= coarser_error) {
+      ladder.erase(ladder.begin() + static_cast<std::ptrdiff_t>(l));
+    } else {
+      coarser_error = ladder[l].deviation.max_pct;
+    }
+  }
   return ladder;
 }
 

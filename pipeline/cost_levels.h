@@ -111,7 +111,8 @@ struct CheapestLevelJob {
 // A character's levels for a spread of on-screen heights: full detail, then for each
 // height the cheapest level within budget_px there (a maximum error of 100 budget_px /
 // height percent of the character's height), kept where it is cheaper than the level
-// before. Costs fall and errors rise along the ladder, and each level's joints are a
+// before and less accurate than every level after. Costs fall and errors rise along the
+// ladder, and each level's joints are a
 // subset of the one before, so the coarsest level within a budget is also the cheapest.
 struct CostLadderJob {
   std::shared_ptr<const core::PreparedMotion> prepared;

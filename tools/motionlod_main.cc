@@ -5,7 +5,7 @@
 //                  [--levels 30,20,10,5 | --all-levels | --heights 800,400,...]
 //                  [--variant vpno+pd] [--fps F] [--lock J,...] [--threads N] [--curves] --out DIR
 //   motionlod export CHARACTER [--motion M] [--animation NAME]... [--variant vpno+pd] [--fps F]
-//                    [--lock J,...] [--joints N | --level-set DIR/levels.mlod [--level I]]
+//                    [--lock J,...] [--joints N] [--level-set DIR/levels.mlod [--level I]]
 //                    --out FILE.glb
 //   motionlod plot REPORT.json -o FIG.svg
 // Exit codes: 0 success, 2 bad input (usage, unreadable or invalid files, impossible

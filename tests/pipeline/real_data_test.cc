@@ -649,6 +649,13 @@ TEST_F(RealData, TheDefaultLadderGetsCheaperWithinTheBudget) {
       EXPECT_EQ(levels[0]["max_vertex_error_pct"].get<double>(), 0.0) << what;
       for (size_t l = 1; l < levels.size(); ++l) {
         EXPECT_LT(levels[l]["cost"].get<double>(), levels[l - 1]["cost"].get<double>()) << what << " " << l;
+        // Each level serves heights no finer level can: it is less accurate, and cheaper
+        // (the first may be exact too: full detail stays the original).
+        if (l >= 2) {
+          EXPECT_GT(levels[l]["max_vertex_error_pct"].get<double>(),
+                    levels[l - 1]["max_vertex_error_pct"].get<double>())
+              << what << " " << l;
+        }
         EXPECT_LE(levels[l]["max_vertex_error_pct"].get<double>(), 100.0 / 12) << what << " " << l;
         EXPECT_LE(levels[l]["joints"].get<int>(), levels[l - 1]["joints"].get<int>()) << what << " " << l;
         for (const auto& name : levels[l - 1]["removed"]) {

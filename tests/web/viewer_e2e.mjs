@@ -341,7 +341,7 @@ try {
   });
   assert.ok(bake, 'no bake to look at');
 
-  const exportCheck = await fetch(`${base}/v1/bakes/${bake.id}/levels/${bake.levels[0].joints}.glb`);
+  const exportCheck = await fetch(`${base}/v1/bakes/${bake.id}/levels/${bake.levels[0].hash}.glb`);
   const levelsExported = exportCheck.status === 200;
   console.log(`     level export route: ${levelsExported ? 'present' : `absent (${exportCheck.status})`}`);
 
@@ -350,9 +350,14 @@ try {
       await moveSlider(page, index);
       const level = bake.levels[index];
       const shown = await figures(page);
-      for (const field of ['joints', 'max_vertex_error_pct', 'mean_vertex_error_pct', 'mean_normal_error_deg', 'mean_E', 'bytes']) {
+      for (const field of ['joints', 'vertices', 'triangles', 'frame_stride', 'stream_bytes_per_second', 'cost',
+        'max_vertex_error_pct', 'mean_vertex_error_pct', 'mean_normal_error_deg', 'mean_E', 'bytes']) {
         assert.equal(Number(shown[field].value), level[field], `level ${index} ${field}`);
       }
+      assert.equal(shown.influences_per_vertex.value === '' ? null : Number(shown.influences_per_vertex.value),
+        level.influences_per_vertex, `level ${index} influences_per_vertex`);
+      assert.match(shown.influences_per_vertex.text,
+        level.influences_per_vertex === null ? /^the mesh's/ : new RegExp(`^at most ${level.influences_per_vertex},`));
       const limit = level.max_px_for_1px_error;
       assert.equal(shown.max_px_for_1px_error.value === '' ? null : Number(shown.max_px_for_1px_error.value), limit);
       assert.match(shown.max_vertex_error_pct.text, new RegExp(`^${level.max_vertex_error_pct.toFixed(3)} `));

@@ -226,7 +226,7 @@ const kCrowdClips = 3;
 async function loadClipGltfs(clip) {
   const { bake } = state;
   return Promise.all(bake.levels.map((level) =>
-    fetchGlb(levelUrl(bake.id, level.joints, clip)).then(parseGlb).catch(() => null)));
+    fetchGlb(levelUrl(bake.id, level, clip)).then(parseGlb).catch(() => null)));
 }
 
 // Fetches every level's glTF export of the chosen clip (and for the crowd, of the next
@@ -240,7 +240,7 @@ async function loadLevels() {
   $('compare-note').textContent = 'loading the levels…';
   state.levelBuffers = await Promise.all(
     bake.levels.map((level) =>
-      fetchGlb(levelUrl(bake.id, level.joints, state.clip)).catch((error) => {
+      fetchGlb(levelUrl(bake.id, level, state.clip)).catch((error) => {
         state.exportError = `${error.title}${error.detail ? `: ${error.detail}` : ''}`;
         return null;
       }),
@@ -290,7 +290,7 @@ async function showLevel(index) {
   const { bake, report } = state;
   state.levelIndex = index;
   const level = bake.levels[index];
-  $('level-label').textContent = `${index}: ${level.joints} of ${state.character.joints} joints`;
+  $('level-label').textContent = `${index}: ${level.joints} of ${state.character.joints} joints, ${level.vertices} vertices`;
   for (const cell of document.querySelectorAll('#level-figures td[data-field]')) {
     const field = cell.dataset.field;
     const unit = cell.dataset.unit ? ` ${cell.dataset.unit}` : '';
@@ -299,8 +299,15 @@ async function showLevel(index) {
     if (field === 'px_range') {
       value = null;
       text = level.chosen ? pixelRange(level.px_min, level.px_max) : 'never (a coarser level is as accurate)';
-    } else if (field === 'joints' || field === 'bytes') {
+    } else if (['joints', 'bytes', 'vertices', 'triangles'].includes(field)) {
       text = `${value}${unit}`;
+    } else if (field === 'influences_per_vertex') {
+      // Its own influences (at most k, re-solved), or the mesh's merged through the joint map.
+      text = `${value === null ? "the mesh's" : `at most ${value}`}, ${format(level.mean_influences, 2)} on average`;
+    } else if (field === 'frame_stride') {
+      text = value === 1 ? 'every frame' : `every ${value}th frame, interpolated between`;
+    } else if (field === 'stream_bytes_per_second') {
+      text = `${Math.round(value)}${unit}`;
     } else if (value === null || value === undefined) {
       text = field === 'max_px_for_1px_error' ? 'exact' : '—';
     } else {
@@ -321,7 +328,7 @@ async function showLevel(index) {
   const gltf = await parseGlb(buffer);
   if (state.levelIndex === index) {
     compare.show(compare.level, gltf, state.clip, jointCount(gltf));
-    $('caption-level').textContent = `level ${index}: ${level.joints} joints`;
+    $('caption-level').textContent = `level ${index}: ${level.joints} joints, ${level.vertices} vertices`;
   }
 }
 

@@ -1,13 +1,15 @@
-// Loading the glTF export of a bake's levels (GET /v1/bakes/{id}/levels/{joints}.glb).
+// Loading the glTF export of a bake's levels (GET /v1/bakes/{id}/levels/{hash}.glb).
 import * as THREE from 'three';
 import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
 import { ApiError, authHeaders } from './api.js';
 
 const loader = new GLTFLoader();
 
-// The level keeping `joints` joints, playing the clip named `clip` (the first when empty).
-export function levelUrl(bakeId, joints, clip = '') {
-  return `/v1/bakes/${bakeId}/levels/${joints}.glb${clip ? `?clip=${encodeURIComponent(clip)}` : ''}`;
+// A level of the bake's level table (its own mesh, influences and pose rate, named by its
+// hash: several levels may keep the same joints), playing the clip named `clip` (the first
+// when empty).
+export function levelUrl(bakeId, level, clip = '') {
+  return `/v1/bakes/${bakeId}/levels/${level.hash}.glb${clip ? `?clip=${encodeURIComponent(clip)}` : ''}`;
 }
 
 // Fetches a GLB from the daemon; failures become ApiErrors with the problem's detail.
