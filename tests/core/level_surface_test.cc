@@ -17,14 +17,14 @@ using testing::MakeCreature;
 using testing::MakeWaveMotion;
 using testing::TestSimd;
 
-struct Scene {
+struct SurfaceScene {
   std::shared_ptr<const Character> character;
   Motion motion;
   std::shared_ptr<const PreparedMotion> prepared;
 };
 
-Scene MakeScene(int segments = 12, int rings = 8) {
-  Scene s;
+SurfaceScene MakeSurfaceScene(int segments = 12, int rings = 8) {
+  SurfaceScene s;
   s.character = BuildOrDie(MakeCreature(segments, rings));
   s.motion = MakeWaveMotion(*s.character, 25);
   s.prepared = *PreparedMotion::Create(s.character, s.motion, SolveSettings{}, TestSimd());
@@ -69,7 +69,7 @@ TEST(PoseRate, RigidInterpolationStaysRigid) {
 }
 
 TEST(LevelDeviation, EqualsTheSolvesMaximumForTheMergedWeightsAtFullRate) {
-  const Scene s = MakeScene();
+  const SurfaceScene s = MakeSurfaceScene();
   const ReducedSkeleton level = Keep(*s.character, {0, 1, 4, 7});
   const LevelResult solved = *s.prepared->SolveLevel(level);
   const LevelInfluences merged = *TruncateInfluences(*s.character, level, 4);
@@ -97,7 +97,7 @@ TEST(LevelDeviation, EqualsTheSolvesMaximumForTheMergedWeightsAtFullRate) {
 }
 
 TEST(SimplifyMesh, KeepsASubsetOfVerticesAndAnHonestBound) {
-  const Scene s = MakeScene();
+  const SurfaceScene s = MakeSurfaceScene();
   const int triangles = static_cast<int>(s.character->skin().triangles.size());
   const LevelMesh mesh =
       *SimplifyMeshJob{s.character.get(), triangles / 4, 0.05 * s.character->height()}.Run();
@@ -134,7 +134,7 @@ TEST(SimplifyMesh, KeepsASubsetOfVerticesAndAnHonestBound) {
 }
 
 TEST(LevelSurface, RefusesBadInput) {
-  const Scene s = MakeScene(8, 4);
+  const SurfaceScene s = MakeSurfaceScene(8, 4);
   EXPECT_FALSE((SimplifyMeshJob{s.character.get(), 0, 0}.Run().ok()));
   EXPECT_FALSE((SimplifyMeshJob{s.character.get(), 10, -1}.Run().ok()));
   EXPECT_FALSE((SimplifyMeshJob{nullptr, 10, 0}.Run().ok()));

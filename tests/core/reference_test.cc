@@ -29,21 +29,21 @@ using testing::TestSimd;
 
 constexpr Variant kVariants[] = {Variant::kVP, Variant::kVPNO, Variant::kVPPD, Variant::kVPNOPD};
 
-struct Scene {
+struct ReferenceScene {
   std::shared_ptr<const Character> character;
   Motion motion;
   JointRanking ranking;
 };
 
-Scene MakeScene(int frames) {
-  Scene s;
+ReferenceScene MakeReferenceScene(int frames) {
+  ReferenceScene s;
   s.character = BuildOrDie(MakeCreature(12, 5));
   s.motion = MakeWaveMotion(*s.character, frames, 0.9);
   s.ranking = *RankJointsJob{s.character.get(), &s.motion, {}, TestSimd()}.Run();
   return s;
 }
 
-std::shared_ptr<const PreparedMotion> Prepare(const Scene& s, Variant variant) {
+std::shared_ptr<const PreparedMotion> Prepare(const ReferenceScene& s, Variant variant) {
   SolveSettings settings;
   settings.variant = variant;
   return *PreparedMotion::Create(s.character, s.motion, settings, TestSimd());
@@ -81,7 +81,7 @@ void ExpectSameFigures(const LevelErrors& fast, const LevelErrors& reference, co
 }
 
 TEST(Reference, RankingMatchesItsReference) {
-  const Scene s = MakeScene(30);
+  const ReferenceScene s = MakeReferenceScene(30);
   for (const std::vector<std::string>& locked : {std::vector<std::string>{}, {"neck", "hand_r"}}) {
     const auto fast = *RankJointsJob{s.character.get(), &s.motion, locked, TestSimd()}.Run();
     const JointRanking reference = RankJointsReference(*s.character, s.motion, locked);
@@ -100,7 +100,7 @@ TEST(Reference, RankingMatchesItsReference) {
 
 TEST(Reference, LevelFiguresMatchTheSkinnedMesh) {
   // 13 frames: the maximum search's batches of four end with a lone frame.
-  const Scene s = MakeScene(13);
+  const ReferenceScene s = MakeReferenceScene(13);
   for (Variant variant : kVariants) {
     const auto prepared = Prepare(s, variant);
     for (int kept = 1; kept <= s.character->joint_count(); ++kept) {
@@ -118,7 +118,7 @@ TEST(Reference, LevelFiguresMatchTheSkinnedMesh) {
 }
 
 TEST(Reference, BaselineSequenceMatchesTheReferenceAtEveryLevel) {
-  const Scene s = MakeScene(9);
+  const ReferenceScene s = MakeReferenceScene(9);
   const auto prepared = Prepare(s, Variant::kVPNOPD);
   BaselineSequence sequence(prepared);
   for (int kept = s.character->joint_count(); kept >= 1; --kept) {
@@ -133,7 +133,7 @@ TEST(Reference, BaselineSequenceMatchesTheReferenceAtEveryLevel) {
 }
 
 TEST(Reference, ProbesDecideLikeTheReferenceMaximum) {
-  const Scene s = MakeScene(20);
+  const ReferenceScene s = MakeReferenceScene(20);
   const auto prepared = Prepare(s, Variant::kVPNOPD);
   for (int kept = 1; kept < s.character->joint_count(); ++kept) {
     const ReducedSkeleton level = *ReduceSkeletonToCount(*s.character, s.ranking, kept);
@@ -153,7 +153,7 @@ TEST(Reference, ProbesDecideLikeTheReferenceMaximum) {
 }
 
 TEST(SmallestLevel, FindsTheFewestJointsWithinTheBound) {
-  const Scene s = MakeScene(16);
+  const ReferenceScene s = MakeReferenceScene(16);
   const auto prepared = Prepare(s, Variant::kVPNO);
   const int n = s.character->joint_count();
   std::vector<double> maximum(n + 1, 0.0);

@@ -11,8 +11,6 @@
 namespace motionlod::server::testing {
 namespace {
 
-constexpr const char* kSampleId =
-    "11422afd50abf7e8c92ea107e2e0bc94abd38023d6d15f55ad580347efbfa29e";
 const std::vector<std::string> kClips = {"Walking_A", "Running_A", "Jump_Start"};
 
 class ClipBakes : public ::testing::Test {

@@ -21,11 +21,6 @@
 namespace motionlod::server::testing {
 namespace {
 
-constexpr const char* kSampleId =
-    "11422afd50abf7e8c92ea107e2e0bc94abd38023d6d15f55ad580347efbfa29e";
-
-std::string Sample() { return SourcePath("samples/Rig_Medium_MovementBasic.glb"); }
-
 // Bakes in-process what the daemon baked for `bake` (its GET /v1/bakes/{id} reply).
 pipeline::BakeOutput BakeLikeTheDaemon(const json& bake, const std::string& character_path,
                                        const std::string& motion_path,

@@ -14,11 +14,6 @@
 namespace motionlod::server::testing {
 namespace {
 
-constexpr const char* kSampleId =
-    "11422afd50abf7e8c92ea107e2e0bc94abd38023d6d15f55ad580347efbfa29e";
-
-std::string Sample() { return SourcePath("samples/Rig_Medium_MovementBasic.glb"); }
-
 // The reply is a problem+json of this status, with no header or body text that a C++
 // exception would have put there.
 void ExpectRawProblem(const RawReply& reply, int status, const std::string& detail_part = "") {

@@ -17,8 +17,6 @@
 namespace motionlod::server::testing {
 namespace {
 
-std::string Sample() { return SourcePath("samples/Rig_Medium_MovementBasic.glb"); }
-
 httplib::Result UploadBytes(httplib::Client& client, const std::string& name,
                             const std::string& bytes) {
   return client.Post(("/v1/characters?filename=" + name).c_str(), bytes,

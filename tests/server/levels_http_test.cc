@@ -8,9 +8,6 @@
 namespace motionlod::server::testing {
 namespace {
 
-constexpr const char* kSampleId =
-    "11422afd50abf7e8c92ea107e2e0bc94abd38023d6d15f55ad580347efbfa29e";
-
 class LevelResponses : public ::testing::Test {
  protected:
   void SetUp() override {

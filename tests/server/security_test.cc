@@ -11,12 +11,8 @@
 namespace motionlod::server::testing {
 namespace {
 
-constexpr const char* kSampleId =
-    "11422afd50abf7e8c92ea107e2e0bc94abd38023d6d15f55ad580347efbfa29e";
 constexpr const char* kWriteKey = "write-key-0123456789abcdef";
 constexpr const char* kReadKey = "read-key-0123456789abcdef";
-
-std::string Sample() { return SourcePath("samples/Rig_Medium_MovementBasic.glb"); }
 
 void ExpectServing(httplib::Client& client) {
   auto health = client.Get("/healthz");

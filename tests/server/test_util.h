@@ -16,6 +16,11 @@ namespace motionlod::server::testing {
 
 using nlohmann::json;
 
+// The CC0 sample the project ships, and its character id (the SHA-256 of its bytes).
+inline constexpr const char* kSampleId =
+    "11422afd50abf7e8c92ea107e2e0bc94abd38023d6d15f55ad580347efbfa29e";
+inline std::string Sample() { return SourcePath("samples/Rig_Medium_MovementBasic.glb"); }
+
 inline json Json(const httplib::Result& result) {
   if (!result) return json();
   return json::parse(result->body, nullptr, false);
