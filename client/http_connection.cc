@@ -32,9 +32,25 @@ std::optional<std::string_view> HttpResponse::Header(std::string_view lower_case
 }
 
 struct HttpConnection::Impl {
-  explicit Impl(const std::string& base_url) : client(base_url) {}
+  explicit Impl(const std::string& base_url) : base_url(base_url), client(base_url) {}
+  std::string base_url;
   httplib::Client client;
 };
+
+// What a failed exchange means, in words a user can act on.
+std::string TransportFailure(httplib::Error error) {
+  switch (error) {
+    case httplib::Error::Connection:
+      return "could not connect (nothing listening there, unreachable, or no answer within the "
+             "connect timeout)";
+    case httplib::Error::Read:
+      return "the connection closed, or no answer came within the read timeout";
+    case httplib::Error::Write:
+      return "the connection closed while the request was being sent";
+    default:
+      return httplib::to_string(error);
+  }
+}
 
 HttpConnection::HttpConnection(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 HttpConnection::~HttpConnection() = default;
@@ -88,7 +104,8 @@ Result<HttpResponse> HttpConnection::Send(const HttpRequest& request) {
   }();
   if (!result) {
     return Error{ErrorKind::kConnection, 0, std::nullopt,
-                 request.method + " " + request.target + ": " + httplib::to_string(result.error())};
+                 request.method + " " + impl_->base_url + request.target + ": " +
+                     TransportFailure(result.error())};
   }
   HttpResponse response;
   response.status = result->status;

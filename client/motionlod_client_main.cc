@@ -37,6 +37,10 @@ constexpr int kExitBadInput = 2;
 
 int Fail(const Error& error) {
   std::cerr << "motionlod-client: error: " << error.message << "\n";
+  if (error.kind == ErrorKind::kConnection) {
+    std::cerr << "  is motionlodd running and listening at that address? (--server or "
+                 "MOTIONLOD_SERVER; --retries and --timeout set how long to try)\n";
+  }
   if (error.problem && !error.problem->request_id.empty())
     std::cerr << "  (request id " << error.problem->request_id << ")\n";
   const bool bad_input = error.kind == ErrorKind::kInvalidArgument || error.client_error();
@@ -362,6 +366,10 @@ int Main(int argc, char** argv) {
     return kExitBadInput;
   }
   options.cache_dir = cache_dir;
+  options.on_retry = [&options](const RetryEvent& event) {
+    std::cerr << "motionlod-client: try " << event.attempt << " of " << options.retry.max_attempts
+              << " failed (" << event.reason << "); again in " << event.delay_seconds << " s\n";
+  };
   auto client = Client::Create(options);
   if (!client.ok()) return Fail(client.error());
   if (upload->parsed()) return RunUpload(*client, upload_paths, for_character, as_json);

@@ -38,6 +38,8 @@ const std::vector<OptionSpec>& Specs() {
       {"jobs", "queue_capacity", &Config::queue_capacity, "queued bakes before 503"},
       {"jobs", "drain_seconds", &Config::drain_seconds,
        "on SIGTERM, time running bakes get to finish"},
+      {"jobs", "max_job_crashes", &Config::max_job_crashes,
+       "daemon deaths during one bake before it is failed"},
       {"cache", "cache_bytes", &Config::cache_bytes, "memory for hot level files (LRU)"},
       {"limits", "max_upload_bytes", &Config::max_upload_bytes,
        "largest upload, decoded (413 beyond)"},
@@ -203,6 +205,7 @@ Status Config::Validate() const {
   if (bake_threads < 0 || bake_threads > 256)
     return InvalidArgument("bake_threads must be in [0, 256]");
   if (queue_capacity < 1) return InvalidArgument("queue_capacity must be at least 1");
+  if (max_job_crashes < 1) return InvalidArgument("max_job_crashes must be at least 1");
   if (!(drain_seconds >= 0)) return InvalidArgument("drain_seconds must be >= 0");
   if (cache_bytes < 0) return InvalidArgument("cache_bytes must be >= 0");
   if (max_upload_bytes < 1) return InvalidArgument("max_upload_bytes must be positive");

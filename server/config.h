@@ -34,6 +34,8 @@ struct Config {
   int queue_capacity = 64;    // queued jobs beyond which POST /v1/bakes answers 503
   double drain_seconds = 10;  // on SIGTERM, how long running bakes may finish before
                               // they are stopped and left queued for the next start
+  int max_job_crashes = 3;    // a bake running when the daemon dies on its this-many-th run
+                              // is failed ('crashed') at the next start, not run again
   // The machine version of the bakes' hot loops (core/simd.h), from MOTIONLOD_SIMD.
   core::SimdChoice simd = core::SimdChoice::kWidest;
 

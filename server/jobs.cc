@@ -15,8 +15,14 @@ namespace motionlod::server {
 namespace api = proto::api;
 
 Status Jobs::Start() {
-  auto unfinished = context_.store->TakeUnfinishedJobs();
-  if (!unfinished.ok()) return unfinished.status();
+  auto taken = context_.store->TakeUnfinishedJobs(context_.config.max_job_crashes, NowMs());
+  if (!taken.ok()) return taken.status();
+  for (const std::string& id : taken->failed) {
+    spdlog::error("bake {} was running at the daemon's last {} stops: failed, not run again", id,
+                  context_.config.max_job_crashes);
+    ++context_.bake_metrics.failed;
+  }
+  const std::vector<std::string>* unfinished = &taken->requeued;
   {
     std::lock_guard lock(board_mutex_);
     for (const std::string& id : *unfinished) {

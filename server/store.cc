@@ -650,19 +650,32 @@ StatusOr<bool> Store::UpdateJob(const JobRecord& job) {
   return sqlite3_changes(db_) > 0;
 }
 
-StatusOr<std::vector<std::string>> Store::TakeUnfinishedJobs() {
+StatusOr<Store::UnfinishedJobs> Store::TakeUnfinishedJobs(int max_runs, int64_t now_ms) {
   std::lock_guard lock(mutex_);
   Transaction transaction(db_);
   if (!transaction.status().ok()) return transaction.status();
+  const auto id_of = [](const Statement& row) { return row.Text(0); };
+  Statement poisoned(db_,
+                     "SELECT id FROM jobs WHERE state = 'running' AND attempts >= ? ORDER BY seq");
+  poisoned.Bind(1, max_runs);
+  auto failed = poisoned.ReadAll("list jobs that crashed the daemon", id_of);
+  if (!failed.ok()) return failed.status();
+  Statement fail(db_,
+                 "UPDATE jobs SET state = 'failed', error_code = 'crashed', error_detail = ?, "
+                 "finished_ms = ? WHERE state = 'running' AND attempts >= ?");
+  fail.Bind(1, "the daemon stopped while running this bake " + std::to_string(max_runs) +
+                   " times (a crash, or the memory limit): it is not run again")
+      .Bind(2, now_ms)
+      .Bind(3, max_runs);
+  if (Status status = fail.Run("fail jobs that crashed the daemon"); !status.ok()) return status;
   Statement reset(
       db_, "UPDATE jobs SET state = 'queued', progress = 0, stage = '' WHERE state = 'running'");
   if (Status status = reset.Run("requeue running jobs"); !status.ok()) return status;
   Statement select(db_, "SELECT id FROM jobs WHERE state = 'queued' ORDER BY seq");
-  auto ids =
-      select.ReadAll("list unfinished jobs", [](const Statement& row) { return row.Text(0); });
+  auto ids = select.ReadAll("list unfinished jobs", id_of);
   if (!ids.ok()) return ids.status();
   if (Status status = transaction.Commit(); !status.ok()) return status;
-  return ids;
+  return UnfinishedJobs{*std::move(ids), *std::move(failed)};
 }
 
 StatusOr<std::map<std::string, int64_t>> Store::CountJobsByState() {

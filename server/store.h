@@ -121,9 +121,15 @@ class Store {
   StatusOr<std::optional<JobRecord>> GetJob(const std::string& id);
   // Updates state, progress, stage, error, attempts and times; false when the job is gone.
   StatusOr<bool> UpdateJob(const JobRecord& job);
-  // Jobs left queued or running (a crash, or a shutdown that stopped them), oldest first;
-  // running ones are set back to queued.
-  StatusOr<std::vector<std::string>> TakeUnfinishedJobs();
+  // The jobs left unfinished when the daemon stopped, to run again.
+  struct UnfinishedJobs {
+    std::vector<std::string> requeued;  // queued, oldest first; running ones set back to queued
+    std::vector<std::string> failed;    // running on their max_runs-th run or later: failed
+  };
+  // A job found running was running when the daemon died (a shutdown leaves them queued).
+  // One that has started max_runs runs is failed ('crashed', at `now_ms`), not run again:
+  // a bake that takes the daemon down every time must not take it down forever.
+  StatusOr<UnfinishedJobs> TakeUnfinishedJobs(int max_runs, int64_t now_ms);
   StatusOr<std::map<std::string, int64_t>> CountJobsByState();
 
   // The byte size of a stored single level, nullopt when no bake has that level.

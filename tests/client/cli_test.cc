@@ -185,9 +185,14 @@ TEST_F(ClientCli, BadInputExitsTwoAndFailuresExitOne) {
   EXPECT_EQ(Cli("--server ftp://nowhere levels " + std::string(64, 'f')).exit_code, 2);
 
   // Nothing listens on port 1: a connection failure after the (one) try.
-  const CliRun unreachable = Cli("--server http://127.0.0.1:1 --retries 1 levels " + std::string(64, 'f'));
+  // No daemon there: the message names the address, says what failed and what to check;
+  // each retry is announced.
+  const CliRun unreachable = Cli("--server http://127.0.0.1:1 --retries 2 levels " + std::string(64, 'f'));
   EXPECT_EQ(unreachable.exit_code, 1);
-  EXPECT_NE(unreachable.err.find("error"), std::string::npos) << unreachable.err;
+  for (const char* part : {"http://127.0.0.1:1/v1/bakes/", "could not connect", "is motionlodd running",
+                           "try 1 of 2 failed"}) {
+    EXPECT_NE(unreachable.err.find(part), std::string::npos) << part << "\n" << unreachable.err;
+  }
 }
 
 }  // namespace

@@ -198,6 +198,8 @@ INSERT INTO jobs (id, bake_id, state, created_ms) VALUES ('b1', 'b1', 'succeeded
   EXPECT_NE(refused.status().message().find("schema version 3"), std::string::npos);
 }
 
+// A job found running was running when the daemon died: it runs again, unless that was
+// its max_runs-th run (a bake that kills the daemon must not do it at every start).
 TEST(Store, KeepsJobsAcrossReopensAndRequeuesTheUnfinished) {
   const fs::path dir = testing::TestDirectory();
   {
@@ -218,7 +220,7 @@ TEST(Store, KeepsJobsAcrossReopensAndRequeuesTheUnfinished) {
     m.source_id = c.id;
     ASSERT_TRUE(*(*store)->InsertCharacter(c, {m}));
     EXPECT_FALSE(*(*store)->InsertCharacter(c, {m}));
-    for (const char* id : {"1", "2", "3"}) {
+    for (const char* id : {"1", "2", "3", "4"}) {
       BakeRecord b;
       b.id = std::string(64, id[0]);
       b.character_id = c.id;
@@ -237,6 +239,10 @@ TEST(Store, KeepsJobsAcrossReopensAndRequeuesTheUnfinished) {
     running.state = "running";
     running.attempts = 1;
     ASSERT_TRUE(*(*store)->UpdateJob(running));
+    JobRecord poison = **(*store)->GetJob(std::string(64, '4'));
+    poison.state = "running";
+    poison.attempts = 3;
+    ASSERT_TRUE(*(*store)->UpdateJob(poison));
     JobRecord done = **(*store)->GetJob(std::string(64, '3'));
     done.state = "succeeded";
     ASSERT_TRUE(*(*store)->UpdateJob(done));
@@ -245,11 +251,19 @@ TEST(Store, KeepsJobsAcrossReopensAndRequeuesTheUnfinished) {
   }
   auto store = Store::Open(dir / "db");
   ASSERT_TRUE(store.ok());
-  auto unfinished = (*store)->TakeUnfinishedJobs();
+  auto unfinished = (*store)->TakeUnfinishedJobs(3, 1234);
   ASSERT_TRUE(unfinished.ok());
-  EXPECT_EQ(*unfinished, (std::vector<std::string>{std::string(64, '1'), std::string(64, '2')}));
+  EXPECT_EQ(unfinished->requeued,
+            (std::vector<std::string>{std::string(64, '1'), std::string(64, '2')}));
+  EXPECT_EQ(unfinished->failed, std::vector<std::string>{std::string(64, '4')});
   EXPECT_EQ((**(*store)->GetJob(std::string(64, '2'))).state, "queued");
+  const JobRecord failed = **(*store)->GetJob(std::string(64, '4'));
+  EXPECT_EQ(failed.state, "failed");
+  EXPECT_EQ(failed.error_code, "crashed");
+  EXPECT_NE(failed.error_detail.find("3 times"), std::string::npos) << failed.error_detail;
+  EXPECT_EQ(failed.finished_ms, 1234);
   EXPECT_EQ((*store)->CountJobsByState()->at("queued"), 2);
+  EXPECT_EQ((*store)->CountJobsByState()->at("failed"), 1);
   // Deleting the character deletes its bakes and jobs and names the blobs to collect.
   auto blobs = (*store)->DeleteCharacter(std::string(64, 'c'));
   ASSERT_TRUE(blobs.ok());
