@@ -190,6 +190,12 @@ int Main(int argc, char** argv) {
   const std::string base_url = "http://" + host + ":" + std::to_string(*port);
   spdlog::info("listening on {} (data in {}, {} connection threads, {} hot loops)", base_url,
                config.data_dir, config.http_threads, core::SimdVersionName(config.simd));
+  // Read keys alone protect reads, not writes: say so, it is rarely what was meant.
+  if (!config.read_keys.empty() && config.write_keys.empty()) {
+    spdlog::warn("read_keys are set but write_keys are not: anyone who reaches {} can upload, "
+                 "bake and delete; set write_keys to protect writes",
+                 base_url);
+  }
   spdlog::default_logger()->flush();
   std::printf("listening on %s\n", base_url.c_str());
   if (context.web != nullptr) std::printf("web viewer: %s/\n", base_url.c_str());

@@ -48,6 +48,26 @@ TEST(DaemonSecurity, WritesNeedTheWriteKeyAndReadsAReadKeyWhenConfigured) {
   EXPECT_EQ(client->Get("/v1/openapi.yaml")->status, 200);
 }
 
+// Read keys alone leave writes open: the daemon serves, and says so when it starts.
+TEST(DaemonSecurity, ReadKeysWithoutWriteKeysAreNamedAtStart) {
+  Daemon daemon(TestDirectory());
+  ASSERT_TRUE(daemon.Start({}, {std::string("MOTIONLODD_READ_KEYS=") + kReadKey})) << daemon.error;
+  EXPECT_NE(daemon.Log().find("read_keys are set but write_keys are not"), std::string::npos)
+      << daemon.Log();
+  auto client = daemon.Client();
+  auto written = UploadFile(*client, Sample(), "rig.glb");
+  ASSERT_TRUE(written);
+  EXPECT_EQ(written->status, 201) << written->body;
+
+  const std::filesystem::path second = daemon.dir() / "second";
+  std::filesystem::create_directories(second);
+  Daemon both(second);
+  ASSERT_TRUE(both.Start({}, {std::string("MOTIONLODD_READ_KEYS=") + kReadKey,
+                              std::string("MOTIONLODD_WRITE_KEYS=") + kWriteKey}))
+      << both.error;
+  EXPECT_EQ(both.Log().find("write_keys are not"), std::string::npos) << both.Log();
+}
+
 TEST(DaemonSecurity, OversizeBodiesAre413WhetherPlainChunkedOrCompressed) {
   Daemon daemon(TestDirectory());
   ASSERT_TRUE(daemon.Start({"--max-upload-bytes", "100000"})) << daemon.error;
