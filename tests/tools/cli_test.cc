@@ -58,6 +58,14 @@ class Cli : public ::testing::Test {
   std::string Sample() const {
     return MOTIONLOD_SOURCE_DIR "/samples/Rig_Medium_MovementBasic.glb";
   }
+  // The sample's Walking_A baked by cost for `heights` into `out`: the report's levels.
+  nlohmann::json BakeForHeights(const fs::path& out, const std::string& heights) const {
+    const ProcessResult bake = Exec("bake " + Sample() + " --threads 2 --animation Walking_A --heights " +
+                                    heights + " --out " + out.string());
+    EXPECT_EQ(bake.exit_code, 0) << bake.output;
+    const nlohmann::json report = nlohmann::json::parse(ReadAll(out / "report.json"), nullptr, false);
+    return report.is_object() ? report["levels"] : nlohmann::json::array();
+  }
   fs::path dir_;
 };
 
@@ -115,11 +123,7 @@ TEST_F(Cli, BakesTheSampleWithTheDefaultLadder) {
 // --heights: the levels by cost for the heights asked, each within 1 px at its height.
 TEST_F(Cli, BakesTheLevelsForTheHeightsAsked) {
   const fs::path out = dir_ / "out";
-  const ProcessResult bake = Exec("bake " + Sample() +
-                                  " --threads 2 --animation Walking_A --heights 60,24 --out " +
-                                  out.string());
-  ASSERT_EQ(bake.exit_code, 0) << bake.output;
-  const nlohmann::json levels = nlohmann::json::parse(ReadAll(out / "report.json"))["levels"];
+  const nlohmann::json levels = BakeForHeights(out, "60,24");
   ASSERT_EQ(levels.size(), 3u) << "full detail, then one level per height";
   EXPECT_EQ(levels[0]["cost"].get<double>(), 1.0);
   const double heights[] = {60, 24};
@@ -316,11 +320,7 @@ TEST_F(Cli, ExportsALevelOfABakedLevelSet) {
 // (the level's vertices and triangles, its influences), into a directory made for it.
 TEST_F(Cli, ExportsEachLevelByCostWithItsOwnMesh) {
   const fs::path out = dir_ / "out";
-  const ProcessResult bake = Exec("bake " + Sample() +
-                                  " --threads 2 --animation Walking_A --heights 60,24 --out " +
-                                  out.string());
-  ASSERT_EQ(bake.exit_code, 0) << bake.output;
-  const nlohmann::json levels = nlohmann::json::parse(ReadAll(out / "report.json"))["levels"];
+  const nlohmann::json levels = BakeForHeights(out, "60,24");
   ASSERT_EQ(levels.size(), 3u);
   const std::string from = " --level-set " + (out / "levels.mlod").string();
   std::vector<fs::path> files;
