@@ -45,7 +45,7 @@ TEST(DaemonRestart, JobsQueuedOrRunningAtASigkillCompleteAfterARestartWithIdenti
   auto character = io::LoadAssetFile(sample);
   ASSERT_TRUE(character.ok());
   for (const std::string& id : ids) {
-    const json finished = WaitForJob(*client, id, 120);
+    const json finished = WaitForJob(*client, id);
     ASSERT_EQ(finished.value("state", ""), "succeeded") << finished.dump();
     const json bake = Json(client->Get(("/v1/bakes/" + id).c_str()));
     if (id == ids[0]) {
@@ -94,7 +94,7 @@ TEST(DaemonRestart, SigtermLeavesUnfinishedJobsQueuedForTheNextStart) {
   ASSERT_TRUE(daemon.Start({"--threads", "1"})) << daemon.error;
   client = daemon.Client();
   for (const std::string& id : ids)
-    EXPECT_EQ(WaitForJob(*client, id, 120).value("state", ""), "succeeded");
+    EXPECT_EQ(WaitForJob(*client, id).value("state", ""), "succeeded");
 }
 
 }  // namespace

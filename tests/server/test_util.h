@@ -64,7 +64,9 @@ inline httplib::Result SubmitBake(httplib::Client& client, const json& request,
 }
 
 // Long-polls GET /v1/jobs/{id}?wait= until the job has finished; returns its last status.
-inline json WaitForJob(httplib::Client& client, const std::string& id, double seconds = 60) {
+// The default leaves room for the sanitizer build, where the sample's default ladder takes
+// a minute or more.
+inline json WaitForJob(httplib::Client& client, const std::string& id, double seconds = 300) {
   json status;
   uint64_t version = 0;
   const auto deadline = std::chrono::steady_clock::now() +
