@@ -28,9 +28,10 @@ targets=("$@")
 
 launcher=()
 command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+# A unity build, as scripts/test.sh's (a few sources a batch: a third of the time).
 cmake -S "$root" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DCMAKE_CXX_COMPILER=clang++ -DMOTIONLOD_BUILD_FUZZERS=ON -DMOTIONLOD_BUILD_TESTS=OFF \
-  "${launcher[@]}" >/dev/null
+  -DCMAKE_UNITY_BUILD=ON "${launcher[@]}" >/dev/null
 # Quiet unless the build fails: then its errors, not a bare exit status.
 if ! ninja -C "$build" "${targets[@]}" make_seeds >"$build/build.log" 2>&1; then
   grep -E 'error|FAILED' "$build/build.log" | head -n 40 >&2
