@@ -23,10 +23,6 @@
 namespace motionlod::pipeline {
 namespace {
 
-// Full detail further off than this (percent of the height) in a rigid variant: the clip
-// scales joints.
-constexpr double kRigidMissPct = 0.1;
-
 using Clock = std::chrono::steady_clock;
 
 double SecondsSince(Clock::time_point start) {

@@ -41,6 +41,10 @@ std::vector<ClipSource> EveryClipOf(const io::Asset& character,
                                     std::shared_ptr<const io::Asset> source,
                                     const std::string& label);
 
+// A rigid bake's full detail further off than this (percent of the height) on a clip: the
+// clip scales joints, which no rigid level follows (the bake warns and names it).
+inline constexpr double kRigidMissPct = 0.1;
+
 struct BakeRequest {
   std::shared_ptr<const io::Asset> character;
   // The clips baked together, in this order: one reduced skeleton per level for all of

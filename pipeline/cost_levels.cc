@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <numeric>
+#include <span>
 #include <string>
 
 #include "core/pose_rate.h"
@@ -28,6 +29,13 @@ constexpr int kProbeFrames = 96;
 // A simplification that keeps more of the triangles than this is not worth a mesh.
 constexpr double kMostTrianglesKept = 0.8;
 
+// Every one of `vertices` vertices bound to one influence of weight 1 (`weights` one per
+// vertex): the skinner's path without a blend.
+bool OneInfluenceEach(std::span<const float> weights, size_t vertices) {
+  return weights.size() == vertices &&
+         std::all_of(weights.begin(), weights.end(), [](float w) { return w == 1.0f; });
+}
+
 // The modelled units of one frame (the header's model).
 double CostUnits(const DrawnLevel& level) {
   const double per_vertex = level.one_influence_each ? kSingleInfluenceVertexCost
@@ -49,10 +57,7 @@ int ProbeStep(int frames) {
 
 double LevelCost(const core::Character& character, const DrawnLevel& level) {
   const core::RawSkin& skin = character.skin();
-  const bool one_each =
-      skin.influence_weights.size() == skin.positions.size() &&
-      std::all_of(skin.influence_weights.begin(), skin.influence_weights.end(),
-                  [](float w) { return w == 1.0f; });
+  const bool one_each = OneInfluenceEach(skin.influence_weights, skin.positions.size());
   const double influences = static_cast<double>(skin.influence_joints.size());
   const DrawnLevel full{static_cast<double>(skin.positions.size()),
                         influences / static_cast<double>(skin.positions.size()), one_each,
@@ -79,8 +84,7 @@ CostLevel SkeletonLevel(const core::Character& character, const core::LevelResul
   const core::ReducedInfluences merged = core::ReduceInfluences(character.skin(), solved.skeleton);
   level.mean_influences = static_cast<double>(merged.slots.size()) / character.vertex_count();
   const bool one_each =
-      merged.slots.size() == static_cast<size_t>(character.vertex_count()) &&
-      std::all_of(merged.weights.begin(), merged.weights.end(), [](float w) { return w == 1.0f; });
+      OneInfluenceEach(merged.weights, static_cast<size_t>(character.vertex_count()));
   level.cost = LevelCost(character, {static_cast<double>(character.vertex_count()),
                                      level.mean_influences, one_each,
                                      solved.skeleton.kept_count(), 1});

@@ -80,7 +80,6 @@ constexpr double kScreenHeightPx = 1080;
 constexpr double kCharacterSizeM = 1.8;  // every character drawn 1.8 m tall
 constexpr double kNearM = 2, kFarM = 100;
 constexpr int kQualityEvery = 10;  // frames between quality samples
-constexpr double kRigidMissPct = 0.1;  // full detail further off: the rigid bake can't follow
 
 struct Options {
   int characters = 1000;
@@ -195,7 +194,7 @@ bool ParseOptions(int argc, char** argv, Options& o) {
 
 bool RigidFullDetailMisses(std::string_view level_set) {
   auto view = proto::DecodeLevelSet(level_set);
-  return view.ok() && view->level(0).figures().max_vertex_error_pct > kRigidMissPct;
+  return view.ok() && view->level(0).figures().max_vertex_error_pct > pipeline::kRigidMissPct;
 }
 
 std::optional<CharacterType> LoadType(const fs::path& path, const Options& o) {
