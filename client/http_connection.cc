@@ -79,6 +79,9 @@ Result<std::unique_ptr<HttpConnection>> HttpConnection::Open(const ConnectionOpt
   client.set_read_timeout(read_s, read_us);
   client.set_write_timeout(write_s, write_us);
   client.set_keep_alive(true);
+  // A request goes out as two writes (head, then body): without TCP_NODELAY the body
+  // waits for the server's delayed ACK of the head, 40 ms per POST on a kept connection.
+  client.set_tcp_nodelay(true);
   client.set_follow_location(false);  // the level redirect is followed by the Client
   return std::unique_ptr<HttpConnection>(new HttpConnection(std::move(impl)));
 }

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Builds the libFuzzer targets of fuzz/ with clang (build-fuzz) and runs each for a bounded
 # time, seeded from ../shared/data, samples/ and the committed regression inputs
-# (fuzz/regressions/<target>/, each replayed first: a regression that crashes again fails).
+# (fuzz/regressions/<target>/, each replayed first: a regression that crashes again fails;
+# the hand-written seeds of api_fuzz and of the DirectX and SMD importers live there too).
 #
 #   bash scripts/fuzz.sh [SECONDS_PER_TARGET] [TARGET...]     (default 60 s, every target)
 #
@@ -52,26 +53,6 @@ if [ ! -e "$work/seeds/.done" ]; then
   done
   "$build/fuzz/make_seeds" "$work/seeds" "$root"/samples/*.glb \
     $([ -d "$data" ] && echo "$data/characters/Fox.glb $data/motions/cmu_131_03.bvh") >/dev/null
-  mkdir -p "$work/seeds/api_fuzz"
-  printf '%s' '{"character":"'"$(printf 'a%.0s' {1..64})"'","levels":[30,10],"fps":24}' \
-    >"$work/seeds/api_fuzz/levels.json"
-  printf '%s' '{"character":"'"$(printf 'b%.0s' {1..64})"'","motion":"Walk","all_levels":true,"variant":"vp","locked_joints":["Head"],"keep_pd_translation":true}' \
-    >"$work/seeds/api_fuzz/all.json"
-  printf '%s' '{"character":"'"$(printf 'c%.0s' {1..64})"'","clips":["Walk","Run"],"ranking":"paper"}' \
-    >"$work/seeds/api_fuzz/clips.json"
-  # The data set has no DirectX or SMD file: a small skinned-skeleton seed of each.
-  mkdir -p "$work/seeds/import_x_fuzz" "$work/seeds/import_smd_fuzz"
-  printf '%s\n' 'xof 0303txt 0032' 'Frame Root {' \
-    ' FrameTransformMatrix { 1.0,0.0,0.0,0.0,0.0,1.0,0.0,0.0,0.0,0.0,1.0,0.0,0.0,0.0,0.0,1.0;; }' \
-    ' Frame Arm { FrameTransformMatrix { 1.0,0.0,0.0,0.0,0.0,1.0,0.0,0.0,0.0,0.0,1.0,0.0,0.0,1.0,0.0,1.0;; } }' \
-    ' Mesh m { 3; 0.0;0.0;0.0;, 1.0;0.0;0.0;, 0.0;1.0;0.0;; 1; 3;0,1,2;;' \
-    '  SkinWeights { "Arm"; 3; 0,1,2; 1.0,1.0,1.0; 1.0,0.0,0.0,0.0,0.0,1.0,0.0,0.0,0.0,0.0,1.0,0.0,0.0,-1.0,0.0,1.0;; } }' \
-    '}' 'AnimationSet Wave { Animation { {Arm} AnimationKey { 0; 2; 0;4;1.0,0.0,0.0,0.0;;, 10;4;0.7071,0.7071,0.0,0.0;;; } } }' \
-    >"$work/seeds/import_x_fuzz/arm.x"
-  printf '%s\n' 'version 1' 'nodes' '0 "root" -1' '1 "arm" 0' 'end' 'skeleton' 'time 0' \
-    '0 0 0 0 0 0 0' '1 0 1 0 0 0 0' 'time 1' '0 0 0 0 0 0 0' '1 0 1 0 0.5 0 0' 'end' 'triangles' \
-    'skin' '1 0 0 0 0 0 1 0 0 1 1 0' '1 1 0 0 0 0 1 1 0 1 1 1' '1 0 1 0 0 0 1 0 1 1 1 1' 'end' \
-    >"$work/seeds/import_smd_fuzz/arm.smd"
   touch "$work/seeds/.done"
 fi
 

@@ -29,7 +29,9 @@ const std::vector<OptionSpec>& Specs() {
   static const std::vector<OptionSpec> specs = {
       {"server", "bind", &Config::bind, "address to listen on (0.0.0.0: every interface)"},
       {"server", "port", &Config::port, "TCP port; 0 picks a free one"},
-      {"server", "http_threads", &Config::http_threads, "connection threads"},
+      {"server", "http_threads", &Config::http_threads, "requests served at once"},
+      {"server", "max_connections", &Config::max_connections,
+       "open connections, idle included (503 beyond)"},
       {"server", "web_root", &Config::web_root, "built web viewer served at / (empty: none)"},
       {"storage", "data_dir", &Config::data_dir, "database and content-addressed blobs"},
       {"jobs", "threads", &Config::threads, "bake workers (0: one per hardware thread)"},
@@ -44,6 +46,8 @@ const std::vector<OptionSpec>& Specs() {
       {"limits", "max_upload_bytes", &Config::max_upload_bytes,
        "largest upload, decoded (413 beyond)"},
       {"limits", "max_json_bytes", &Config::max_json_bytes, "largest JSON request body"},
+      {"limits", "max_header_bytes", &Config::max_header_bytes,
+       "request line and headers (431 beyond)"},
       {"limits", "max_upload_parts", &Config::max_upload_parts, "multipart parts of one upload"},
       {"limits", "max_concurrent_uploads", &Config::max_concurrent_uploads,
        "upload bodies received at once"},
@@ -52,6 +56,8 @@ const std::vector<OptionSpec>& Specs() {
       {"limits", "max_streams", &Config::max_streams, "open SSE streams and long-polls together"},
       {"limits", "max_wait_seconds", &Config::max_wait_seconds, "cap of ?wait= on job status"},
       {"limits", "max_stream_seconds", &Config::max_stream_seconds, "longest SSE stream"},
+      {"timeouts", "header_timeout_seconds", &Config::header_timeout_seconds,
+       "a request's line and headers (408 beyond)"},
       {"timeouts", "read_timeout_seconds", &Config::read_timeout_seconds, "one socket read"},
       {"timeouts", "write_timeout_seconds", &Config::write_timeout_seconds, "one socket write"},
       {"timeouts", "keep_alive_timeout_seconds", &Config::keep_alive_timeout_seconds,
@@ -200,6 +206,8 @@ Status Config::Validate() const {
   if (port < 0 || port > 65535) return InvalidArgument("port must be in [0, 65535]");
   if (http_threads < 4 || http_threads > 1024)
     return InvalidArgument("http_threads must be in [4, 1024]");
+  if (max_connections < http_threads || max_connections > 1 << 20)
+    return InvalidArgument("max_connections must be in [http_threads, 1048576]");
   if (data_dir.empty()) return InvalidArgument("data_dir must not be empty");
   if (threads < 0 || threads > 256) return InvalidArgument("threads must be in [0, 256]");
   if (bake_threads < 0 || bake_threads > 256)
@@ -210,6 +218,9 @@ Status Config::Validate() const {
   if (cache_bytes < 0) return InvalidArgument("cache_bytes must be >= 0");
   if (max_upload_bytes < 1) return InvalidArgument("max_upload_bytes must be positive");
   if (max_json_bytes < 1) return InvalidArgument("max_json_bytes must be positive");
+  // The HTTP library's own limit per header line is 8 KiB.
+  if (max_header_bytes < 1024 || max_header_bytes > int64_t{1} << 20)
+    return InvalidArgument("max_header_bytes must be in [1024, 1048576]");
   if (max_upload_parts < 1 || max_upload_parts > 1000)
     return InvalidArgument("max_upload_parts must be in [1, 1000]");
   if (max_concurrent_imports < 1)
@@ -228,6 +239,8 @@ Status Config::Validate() const {
                     upload_timeout_seconds}) {
     if (value < 1) return InvalidArgument("timeouts must be at least 1 second");
   }
+  if (!(header_timeout_seconds > 0 && header_timeout_seconds <= 3600))
+    return InvalidArgument("header_timeout_seconds must be in (0, 3600]");
   if (keep_alive_max_requests < 1)
     return InvalidArgument("keep_alive_max_requests must be at least 1");
   if (import_isolation != "auto" && import_isolation != "bwrap" && import_isolation != "process")

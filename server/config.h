@@ -19,7 +19,8 @@ struct Config {
   // Network.
   std::string bind = "127.0.0.1";
   int port = 8080;  // 0: any free port (logged, and printed as "listening on http://HOST:PORT")
-  int http_threads = 64;  // connection threads; each open keep-alive connection holds one
+  int http_threads = 64;  // connection threads: requests served at once (server/connection_gate.h)
+  int max_connections = 4096;  // open connections, idle or not (503 and closed beyond)
   // The built web viewer (web/dist, made by scripts/setup.sh), served at "/"; relative to
   // the working directory. Empty, or a directory without index.html: "/" says how to
   // build it, and the API is unaffected.
@@ -45,6 +46,7 @@ struct Config {
   // Limits.
   int64_t max_upload_bytes = int64_t{64} << 20;  // decoded body of an upload (413 beyond)
   int64_t max_json_bytes = int64_t{64} << 10;    // body of a JSON request
+  int64_t max_header_bytes = int64_t{32} << 10;  // request line and headers (431 beyond)
   int max_upload_parts = 32;                     // multipart parts of one upload
   int max_concurrent_uploads = 8;   // upload bodies being received at once (503 beyond):
                                     // bounds their memory to this x max_upload_bytes
@@ -54,6 +56,7 @@ struct Config {
   double max_stream_seconds = 300;  // an SSE stream ends after this (clients reconnect)
 
   // Timeouts (seconds).
+  double header_timeout_seconds = 10;  // a request's line and headers, from its first byte
   int read_timeout_seconds = 10;   // one read on a connection
   int write_timeout_seconds = 10;  // one write on a connection
   int keep_alive_timeout_seconds = 5;

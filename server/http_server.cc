@@ -19,6 +19,8 @@
 #include <mutex>
 #include <thread>
 
+#include "server/connection_gate.h"
+
 namespace motionlod::server {
 namespace {
 
@@ -36,8 +38,96 @@ struct RequestContext {
   http::Request request;
   // The bytes of a zero-copy response, alive until the library has written them.
   std::shared_ptr<const std::string> response_bytes;
+  // The response closes its connection: it said so, or the library refused the request
+  // before any route saw it (a malformed request line or header).
+  bool close_connection = false;
 };
 thread_local RequestContext t_request;
+
+// The library, with its thread per socket replaced by the connection gate: an accepted
+// socket goes to the gate, which calls the library back per ready request.
+class GatedServer final : public httplib::Server {
+ public:
+  using httplib::Server::process_request;
+  std::function<void(int)> admit;
+
+ private:
+  bool process_and_close_socket(socket_t sock) override {
+    admit(sock);
+    return true;
+  }
+};
+
+// The library's only task is handing an accepted socket over, which never blocks: it
+// runs on the accepting thread.
+class InlineTaskQueue final : public httplib::TaskQueue {
+ public:
+  void enqueue(std::function<void()> task) override { task(); }
+  void shutdown() override {}
+};
+
+// A gate connection as the library's stream, with the configured read and write timeouts.
+class GateStream final : public httplib::Stream {
+ public:
+  GateStream(Connection& connection, int read_timeout_ms, int write_timeout_ms)
+      : connection_(connection),
+        read_timeout_ms_(read_timeout_ms),
+        write_timeout_ms_(write_timeout_ms) {}
+  bool is_readable() const override {
+    return connection_.HasBufferedBytes() || connection_.WaitReadable(read_timeout_ms_);
+  }
+  bool is_writable() const override { return connection_.WaitWritable(write_timeout_ms_); }
+  ssize_t read(char* data, size_t size) override {
+    return connection_.Read(data, size, read_timeout_ms_);
+  }
+  ssize_t write(const char* data, size_t size) override {
+    return connection_.Write(data, size, write_timeout_ms_);
+  }
+  void get_remote_ip_and_port(std::string& ip, int& port) const override {
+    ip = connection_.remote_ip();
+    port = connection_.remote_port();
+  }
+  void get_local_ip_and_port(std::string& ip, int& port) const override {
+    ip = connection_.local_ip();
+    port = connection_.local_port();
+  }
+  // The library answers 500 to a socket number at or above FD_SETSIZE, which it would
+  // select() on; nothing selects on this one, and a thousand connections pass 1024.
+  socket_t socket() const override { return 0; }
+
+ private:
+  Connection& connection_;
+  const int read_timeout_ms_;
+  const int write_timeout_ms_;
+};
+
+// The answer to a connection the gate closes unserved.
+std::string RefusalResponse(ConnectionRefusal why) {
+  int status = 503;
+  std::string detail;
+  std::string extra;
+  switch (why) {
+    case ConnectionRefusal::kHeaderTimeout:
+      status = 408;
+      detail = "the request headers did not arrive in time (header_timeout_seconds)";
+      break;
+    case ConnectionRefusal::kHeaderTooLarge:
+      status = 431;
+      detail = "the request line and headers are larger than max_header_bytes";
+      break;
+    case ConnectionRefusal::kTooManyConnections:
+      detail = "too many open connections (max_connections); retry shortly";
+      extra = "Retry-After: 1\r\n";
+      break;
+  }
+  const std::string id = http::NewRequestId();
+  const std::string body = http::ProblemJson(status, detail, "", id);
+  return fmt::format(
+      "HTTP/1.1 {} {}\r\nContent-Type: application/problem+json\r\nContent-Length: {}\r\n"
+      "Connection: close\r\n{}: {}\r\nX-Request-Id: {}\r\n{}\r\n{}",
+      status, http::StatusTitle(status), body.size(), http::kNoSniffHeader.name,
+      http::kNoSniffHeader.value, id, extra, body);
+}
 
 constexpr const char* kAnyPath = "[\\s\\S]*";
 // Bytes of an unread request body read and dropped to keep the connection usable.
@@ -229,7 +319,11 @@ struct HttpServer::Impl {
   http::FramingLimits framing;
   // Null when access_log is off.
   std::unique_ptr<AccessLog> access_log;
-  httplib::Server server;
+  GatedServer server;
+  // Serves one ready request of a gate connection; true to keep the connection.
+  bool Serve(Connection& connection);
+  // Made by Run(), stopped when the listener's loop has ended.
+  std::unique_ptr<ConnectionGate> gate;
   std::atomic<int> listen_fd{-1};
   // The library's stop() does nothing until its listen loop has started: a SIGTERM
   // right after "listening on" was lost, and the daemon served on. Run() and Stop()
@@ -241,10 +335,8 @@ struct HttpServer::Impl {
 };
 
 void HttpServer::Impl::Configure() {
-  const int threads = config.http_threads;
-  server.new_task_queue = [threads] {
-    return new httplib::ThreadPool(static_cast<size_t>(threads));
-  };
+  server.new_task_queue = [] { return new InlineTaskQueue(); };
+  server.admit = [this](int fd) { gate->Admit(fd); };
   server.set_socket_options([this](int fd) {
     const int yes = 1;
     ::setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof yes);
@@ -504,8 +596,20 @@ void HttpServer::Impl::Write(const httplib::Request& req, http::Response& out,
   }
 }
 
+bool HttpServer::Impl::Serve(Connection& connection) {
+  GateStream stream(connection, config.read_timeout_seconds * 1000,
+                    config.write_timeout_seconds * 1000);
+  const bool last =
+      ++connection.requests_served >= config.keep_alive_max_requests || gate->stopping();
+  bool client_closes = false;
+  t_request.close_connection = false;
+  const bool written = server.process_request(stream, last, client_closes, nullptr);
+  return written && !last && !client_closes && !t_request.close_connection;
+}
+
 void HttpServer::Impl::Log(const httplib::Request& req, const httplib::Response& res) {
   const bool active = t_request.active;
+  t_request.close_connection = !active || res.get_header_value("Connection") == "close";
   const double seconds =
       active ? std::chrono::duration<double>(Clock::now() - t_request.start).count() : 0.0;
   metrics.Record(active ? t_request.route : metrics.unmatched(), res.status, seconds);
@@ -547,7 +651,19 @@ bool HttpServer::Run() {
     if (impl_->stop_requested) return true;
     impl_->run_started = true;
   }
+  GateLimits limits;
+  limits.max_connections = impl_->config.max_connections;
+  limits.max_header_bytes = static_cast<size_t>(impl_->config.max_header_bytes);
+  limits.header_timeout_seconds = impl_->config.header_timeout_seconds;
+  limits.keep_alive_timeout_seconds = impl_->config.keep_alive_timeout_seconds;
+  limits.threads = impl_->config.http_threads;
+  impl_->gate = std::make_unique<ConnectionGate>(
+      limits, impl_->metrics.connections,
+      [this](Connection& connection) { return impl_->Serve(connection); },
+      RefusalResponse);
   const bool served = impl_->server.listen_after_bind();
+  // Waiting connections are closed; requests being served finish.
+  impl_->gate->Stop();
   impl_->run_ended = true;
   // The connection threads have ended: their last access lines go out now.
   if (impl_->access_log) impl_->access_log->Flush();

@@ -9,6 +9,7 @@
 #include <signal.h>
 #include <spdlog/sinks/base_sink.h>
 #include <spdlog/spdlog.h>
+#include <sys/resource.h>
 
 #include <atomic>
 #include <cstdio>
@@ -124,6 +125,26 @@ void Seed(Service& service, const Options& options, const std::string& base_url)
   std::fflush(stdout);
 }
 
+// Each open connection is a file descriptor: the soft limit (often 1024) goes up to the
+// hard one, and a hard limit below max_connections is named.
+void RaiseDescriptorLimit(const Config& config) {
+  rlimit files{};
+  if (::getrlimit(RLIMIT_NOFILE, &files) != 0) return;
+  if (files.rlim_cur < files.rlim_max) {
+    files.rlim_cur = files.rlim_max;
+    ::setrlimit(RLIMIT_NOFILE, &files);
+  }
+  // Descriptors beyond connections: the database, blobs, import workers, logs.
+  constexpr rlim_t kOtherDescriptors = 256;
+  const auto wanted = static_cast<rlim_t>(config.max_connections) + kOtherDescriptors;
+  if (files.rlim_cur != RLIM_INFINITY && files.rlim_cur < wanted) {
+    spdlog::warn("the open-file limit is {} but max_connections is {}: connections beyond about "
+                 "{} wait in the listen queue (raise it with ulimit -n or LimitNOFILE=)",
+                 files.rlim_cur, config.max_connections,
+                 files.rlim_cur > kOtherDescriptors ? files.rlim_cur - kOtherDescriptors : 0);
+  }
+}
+
 int Main(int argc, char** argv) {
   // Signals go to the thread that waits for them, never to a worker.
   sigset_t signals;
@@ -146,6 +167,7 @@ int Main(int argc, char** argv) {
   }
   const Config& config = options->config;
   SetUpLogging(config);
+  RaiseDescriptorLimit(config);
 
   auto service = Service::Open(config);
   if (!service.ok()) {

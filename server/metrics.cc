@@ -114,6 +114,20 @@ void HttpMetrics::Render(std::string& out) const {
                                   "route=\"" + EscapeLabel(routes_[r].route) + "\",method=\"" +
                                       EscapeLabel(routes_[r].method) + "\"");
   }
+  out += "# HELP motionlodd_http_connections Open connections: idle, sending headers or served.\n";
+  out += "# TYPE motionlodd_http_connections gauge\n";
+  out += "motionlodd_http_connections " +
+         std::to_string(connections.open.load(std::memory_order_relaxed)) + "\n";
+  out += "# HELP motionlodd_http_connections_refused_total Connections closed unserved, by "
+         "reason.\n";
+  out += "# TYPE motionlodd_http_connections_refused_total counter\n";
+  static constexpr const char* kReasons[kConnectionRefusals] = {
+      "header_timeout", "header_too_large", "too_many_connections"};
+  for (int reason = 0; reason < kConnectionRefusals; ++reason) {
+    out += std::string("motionlodd_http_connections_refused_total{reason=\"") + kReasons[reason] +
+           "\"} " + std::to_string(connections.refused[reason].load(std::memory_order_relaxed)) +
+           "\n";
+  }
 }
 
 }  // namespace motionlod::server

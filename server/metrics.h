@@ -28,7 +28,18 @@ class Histogram {
   std::atomic<uint64_t> sum_nanos_{0};
 };
 
-// Request counts by (route, method, code) and latency by (route, method).
+// Why the HTTP layer closed a connection without serving it (server/connection_gate.h).
+enum class ConnectionRefusal { kHeaderTimeout, kHeaderTooLarge, kTooManyConnections };
+inline constexpr int kConnectionRefusals = 3;
+
+// Open connections and refusals, kept by the connection gate.
+struct ConnectionCounters {
+  std::atomic<int64_t> open{0};
+  std::array<std::atomic<uint64_t>, kConnectionRefusals> refused{};
+};
+
+// Request counts by (route, method, code) and latency by (route, method), and the
+// connection counters.
 class HttpMetrics {
  public:
   struct RouteLabel {
@@ -40,6 +51,7 @@ class HttpMetrics {
   void Record(int route, int status, double seconds);
   void Render(std::string& out) const;
   int unmatched() const { return static_cast<int>(routes_.size()) - 1; }
+  ConnectionCounters connections;
 
  private:
   static constexpr int kCodes = 500;  // status 100..599

@@ -125,6 +125,7 @@ std::unique_ptr<httplib::Client> Daemon::Client() const {
   client->set_connection_timeout(5, 0);
   client->set_read_timeout(60, 0);
   client->set_write_timeout(60, 0);
+  client->set_tcp_nodelay(true);  // as the client library: no delayed-ACK wait per POST
   return client;
 }
 

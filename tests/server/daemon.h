@@ -35,6 +35,7 @@ class Daemon {
   bool ReadStdoutLine(std::string& line, std::chrono::steady_clock::time_point deadline);
 
   int port() const { return port_; }
+  pid_t pid() const { return pid_; }
   std::unique_ptr<httplib::Client> Client() const;
   std::string Log() const;
   const std::filesystem::path& dir() const { return dir_; }

@@ -219,9 +219,11 @@ TEST_F(HostileHttp, ManyOverlappingRangesAreMergedOrIgnored) {
 }
 
 TEST_F(HostileHttp, SlowClientsAreCutOffAndDoNotHoldTheDaemon) {
-  // Four connection threads, one-second socket timeouts, two seconds for a body.
-  StartDaemon({"--http-threads", "4", "--max-streams", "1", "--read-timeout-seconds", "1",
-               "--keep-alive-timeout-seconds", "1", "--upload-timeout-seconds", "2"});
+  // Four connection threads, one second for headers and for each socket read, two
+  // seconds for a body.
+  StartDaemon({"--http-threads", "4", "--max-streams", "1", "--header-timeout-seconds", "1",
+               "--read-timeout-seconds", "1", "--keep-alive-timeout-seconds", "1",
+               "--upload-timeout-seconds", "2"});
   // Silent clients, one per connection thread: a half-sent request line, half-sent
   // headers, an idle keep-alive connection, an open connection that never says anything.
   std::vector<std::unique_ptr<RawConnection>> silent;

@@ -94,17 +94,21 @@ TEST_F(LevelResponses, AnswerUnsatisfiableRangesWith416AndIgnoreOthers) {
       client_->Get(url_.c_str(), {{"Range", "bytes=" + std::to_string(bytes_.size()) + "-"}});
   ExpectProblem(beyond, 416);
   EXPECT_EQ(beyond->get_header_value("Content-Range"), "bytes */" + std::to_string(bytes_.size()));
-  // cpp-httplib parses Range before any route runs and answers what it cannot parse
-  // (another unit, bad syntax) with 416 itself; the daemon turns that into problem+json.
-  ExpectProblem(client_->Get(url_.c_str(), {{"Range", "items=0-9"}}), 416);
-  // Disjoint ranges, too many ranges and a stale If-Range: the whole file.
+  // cpp-httplib parses Range before any route runs and answers bad syntax with 416
+  // itself; the daemon turns that into problem+json.
+  ExpectProblem(client_->Get(url_.c_str(), {{"Range", "bytes=nine-"}}), 416);
+  // Another unit (RFC 9110 says to ignore it; the connection gate drops it before the
+  // library sees it), disjoint ranges, too many ranges and a stale If-Range: the whole
+  // file.
   std::string many = "bytes=0-0";
   for (int r = 1; r < 40; ++r) {
     const std::string at = std::to_string(2 * r);
     many.append(",").append(at).append("-").append(at);
   }
   for (const httplib::Headers& headers :
-       std::vector<httplib::Headers>{{{"Range", "bytes=0-9,100-109"}},
+       std::vector<httplib::Headers>{{{"Range", "items=0-9"}},
+                                     {{"range", " Items=0-9"}},
+                                     {{"Range", "bytes=0-9,100-109"}},
                                      {{"Range", many}},
                                      {{"Range", "bytes=0-9"}, {"If-Range", "\"stale\""}}}) {
     auto result = client_->Get(url_.c_str(), headers);

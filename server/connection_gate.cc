@@ -1,0 +1,381 @@
+#include "server/connection_gate.h"
+
+#include <arpa/inet.h>
+#include <fcntl.h>
+#include <netinet/in.h>
+#include <poll.h>
+#include <sys/epoll.h>
+#include <sys/eventfd.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cerrno>
+#include <cstring>
+
+namespace motionlod::server {
+namespace {
+
+// Bytes read from a socket at once while serving (the library reads a byte at a time).
+constexpr size_t kReadChunk = 16 << 10;
+// After a refusal, what a client still sends is dropped for this long, up to this much.
+constexpr double kLingerSeconds = 2;
+constexpr size_t kLingerBytes = 1 << 20;
+
+void Address(const sockaddr_storage& address, std::string& ip, int& port) {
+  char text[INET6_ADDRSTRLEN] = {};
+  if (address.ss_family == AF_INET) {
+    const auto& v4 = reinterpret_cast<const sockaddr_in&>(address);
+    ::inet_ntop(AF_INET, &v4.sin_addr, text, sizeof text);
+    port = ntohs(v4.sin_port);
+  } else if (address.ss_family == AF_INET6) {
+    const auto& v6 = reinterpret_cast<const sockaddr_in6&>(address);
+    ::inet_ntop(AF_INET6, &v6.sin6_addr, text, sizeof text);
+    port = ntohs(v6.sin6_port);
+  }
+  ip = text;
+}
+
+bool StartsWithNoCase(std::string_view text, std::string_view prefix) {
+  if (text.size() < prefix.size()) return false;
+  for (size_t i = 0; i < prefix.size(); ++i) {
+    if (std::tolower(static_cast<unsigned char>(text[i])) != prefix[i]) return false;
+  }
+  return true;
+}
+
+int PollOne(int fd, short events, int timeout_ms, short& revents) {
+  pollfd entry{fd, events, 0};
+  int ready;
+  do {
+    ready = ::poll(&entry, 1, timeout_ms);
+  } while (ready < 0 && errno == EINTR);
+  revents = entry.revents;
+  return ready;
+}
+
+}  // namespace
+
+Connection::Connection(int fd) : fd_(fd) {
+  ::fcntl(fd_, F_SETFL, ::fcntl(fd_, F_GETFL, 0) | O_NONBLOCK);
+  sockaddr_storage address{};
+  socklen_t length = sizeof address;
+  if (::getpeername(fd_, reinterpret_cast<sockaddr*>(&address), &length) == 0) {
+    Address(address, remote_ip_, remote_port_);
+  }
+  length = sizeof address;
+  if (::getsockname(fd_, reinterpret_cast<sockaddr*>(&address), &length) == 0) {
+    Address(address, local_ip_, local_port_);
+  }
+}
+
+Connection::~Connection() {
+  ::shutdown(fd_, SHUT_RDWR);
+  ::close(fd_);
+}
+
+bool Connection::WaitReadable(int timeout_ms) const {
+  short revents = 0;
+  return PollOne(fd_, POLLIN, timeout_ms, revents) > 0;
+}
+
+bool Connection::WaitWritable(int timeout_ms) const {
+  short revents = 0;
+  return PollOne(fd_, POLLOUT, timeout_ms, revents) > 0 && (revents & POLLOUT) != 0 &&
+         (revents & (POLLERR | POLLHUP)) == 0;
+}
+
+ssize_t Connection::Read(char* data, size_t size, int timeout_ms) {
+  if (size == 0) return 0;
+  if (!HasBufferedBytes()) {
+    buffer_.clear();
+    begin_ = 0;
+    scanned_ = 0;
+    for (;;) {
+      if (!WaitReadable(timeout_ms)) return -1;
+      char* target = data;
+      size_t capacity = size;
+      if (size < kReadChunk) {
+        buffer_.resize(kReadChunk);
+        target = buffer_.data();
+        capacity = kReadChunk;
+      }
+      const ssize_t got = ::recv(fd_, target, capacity, 0);
+      if (got < 0 && (errno == EAGAIN || errno == EINTR)) continue;
+      if (target != data) buffer_.resize(got > 0 ? static_cast<size_t>(got) : 0);
+      if (got <= 0 || target == data) return got;
+      break;
+    }
+  }
+  const size_t count = std::min(size, buffer_.size() - begin_);
+  std::memcpy(data, buffer_.data() + begin_, count);
+  begin_ += count;
+  return static_cast<ssize_t>(count);
+}
+
+ssize_t Connection::Write(const char* data, size_t size, int timeout_ms) {
+  size_t done = 0;
+  while (done < size) {
+    const ssize_t sent = ::send(fd_, data + done, size - done, MSG_NOSIGNAL);
+    if (sent > 0) {
+      done += static_cast<size_t>(sent);
+    } else if (sent < 0 && errno == EINTR) {
+      continue;
+    } else if (sent < 0 && errno == EAGAIN) {
+      if (!WaitWritable(timeout_ms)) return -1;
+    } else {
+      return -1;
+    }
+  }
+  return static_cast<ssize_t>(size);
+}
+
+bool Connection::ReadAvailable(size_t limit) {
+  if (begin_ > 0) {
+    buffer_.erase(buffer_.begin(), buffer_.begin() + static_cast<std::ptrdiff_t>(begin_));
+    begin_ = 0;
+  }
+  while (buffer_.size() < limit) {
+    const size_t held = buffer_.size();
+    buffer_.resize(std::min(limit, held + kReadChunk));
+    const ssize_t got = ::recv(fd_, buffer_.data() + held, buffer_.size() - held, 0);
+    buffer_.resize(held + (got > 0 ? static_cast<size_t>(got) : 0));
+    if (got == 0) return false;
+    if (got < 0) {
+      if (errno == EINTR) continue;
+      return errno == EAGAIN;
+    }
+  }
+  return true;
+}
+
+size_t Connection::HeaderLength() {
+  const std::string_view held(buffer_.data() + begin_, buffer_.size() - begin_);
+  const size_t from = scanned_ > 3 ? scanned_ - 3 : 0;
+  const size_t end = held.find("\r\n\r\n", from);
+  if (end == std::string_view::npos) {
+    scanned_ = held.size();
+    return 0;
+  }
+  return end + 4;
+}
+
+void Connection::DropIgnorableHeaders(size_t header_length) {
+  size_t line = begin_;
+  const size_t header_end = begin_ + header_length;
+  while (line < header_end) {
+    const std::string_view rest(buffer_.data() + line, header_end - line);
+    const size_t next = rest.find("\r\n") + 2;
+    std::string_view field = rest.substr(0, next - 2);
+    if (line != begin_ && StartsWithNoCase(field, "range:")) {
+      field.remove_prefix(6);
+      while (!field.empty() && (field.front() == ' ' || field.front() == '\t')) {
+        field.remove_prefix(1);
+      }
+      if (!StartsWithNoCase(field, "bytes=")) {
+        const auto at = buffer_.begin() + static_cast<std::ptrdiff_t>(line);
+        buffer_.erase(at, at + static_cast<std::ptrdiff_t>(next));
+        return;
+      }
+    }
+    line += next;
+  }
+}
+
+ConnectionGate::ConnectionGate(const GateLimits& limits, ConnectionCounters& counters, Serve serve,
+                               RefusalResponse refusal)
+    : limits_(limits), counters_(counters), serve_(std::move(serve)), refusal_(std::move(refusal)) {
+  epoll_fd_ = ::epoll_create1(EPOLL_CLOEXEC);
+  wake_fd_ = ::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
+  epoll_event wake{};
+  wake.events = EPOLLIN;
+  wake.data.fd = wake_fd_;
+  ::epoll_ctl(epoll_fd_, EPOLL_CTL_ADD, wake_fd_, &wake);
+  poll_thread_ = std::thread([this] { PollLoop(); });
+  for (int i = 0; i < std::max(1, limits_.threads); ++i) {
+    serve_threads_.emplace_back([this] { ServeLoop(); });
+  }
+}
+
+ConnectionGate::~ConnectionGate() {
+  Stop();
+  ::close(epoll_fd_);
+  ::close(wake_fd_);
+}
+
+void ConnectionGate::Admit(int fd) {
+  auto connection = std::make_unique<Connection>(fd);
+  if (counters_.open.fetch_add(1, std::memory_order_relaxed) >= limits_.max_connections) {
+    Refuse(std::move(connection), ConnectionRefusal::kTooManyConnections);
+    return;
+  }
+  Park(std::move(connection), false);
+}
+
+void ConnectionGate::Park(std::unique_ptr<Connection> connection, bool idle) {
+  std::lock_guard lock(mutex_);
+  if (stopping_) return Close(std::move(connection));
+  // The request often came with the connection, or was pipelined behind the last one.
+  connection->scanned_ = 0;
+  const bool open = connection->ReadAvailable(limits_.max_header_bytes);
+  if (connection->HeaderLength() > 0) return Dispatch(std::move(connection));
+  if (!open) return Close(std::move(connection));
+  if (connection->buffer_.size() >= limits_.max_header_bytes) {
+    return Refuse(std::move(connection), ConnectionRefusal::kHeaderTooLarge);
+  }
+  idle = idle && !connection->HasBufferedBytes();
+  Watch(std::move(connection),
+        std::chrono::duration<double>(idle ? limits_.keep_alive_timeout_seconds
+                                           : limits_.header_timeout_seconds),
+        idle, false);
+}
+
+void ConnectionGate::Watch(std::unique_ptr<Connection> connection,
+                           std::chrono::duration<double> wait, bool idle, bool draining) {
+  const int fd = connection->fd();
+  epoll_event event{};
+  event.events = EPOLLIN | EPOLLRDHUP;
+  event.data.fd = fd;
+  ::epoll_ctl(epoll_fd_, EPOLL_CTL_ADD, fd, &event);
+  waiting_[fd] =
+      Waiting{std::move(connection),
+              Clock::now() + std::chrono::duration_cast<Clock::duration>(wait), idle, draining};
+}
+
+void ConnectionGate::OnReadable(int fd) {
+  const auto found = waiting_.find(fd);
+  if (found == waiting_.end()) return;
+  Waiting& waiting = found->second;
+  Connection& connection = *waiting.connection;
+  if (waiting.draining) {
+    char dropped[kReadChunk];
+    ssize_t got = 0;
+    while (connection.dropped_ <= kLingerBytes &&
+           (got = ::recv(fd, dropped, sizeof dropped, 0)) > 0) {
+      connection.dropped_ += static_cast<size_t>(got);
+    }
+    const bool open = got > 0 || (got < 0 && (errno == EAGAIN || errno == EINTR));
+    if (!open || connection.dropped_ > kLingerBytes) {
+      ::epoll_ctl(epoll_fd_, EPOLL_CTL_DEL, fd, nullptr);
+      std::unique_ptr<Connection> taken = std::move(waiting.connection);
+      waiting_.erase(found);
+      Close(std::move(taken));
+    }
+    return;
+  }
+  const bool open = connection.ReadAvailable(limits_.max_header_bytes);
+  const bool complete = connection.HeaderLength() > 0;
+  const bool too_large = !complete && connection.buffer_.size() >= limits_.max_header_bytes;
+  if (complete || !open || too_large) {
+    ::epoll_ctl(epoll_fd_, EPOLL_CTL_DEL, fd, nullptr);
+    std::unique_ptr<Connection> taken = std::move(waiting.connection);
+    waiting_.erase(found);
+    if (complete) return Dispatch(std::move(taken));
+    if (too_large) return Refuse(std::move(taken), ConnectionRefusal::kHeaderTooLarge);
+    return Close(std::move(taken));
+  }
+  if (waiting.idle && connection.HasBufferedBytes()) {
+    // The next request has begun: it now has the header deadline.
+    waiting.idle = false;
+    waiting.deadline =
+        Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                           std::chrono::duration<double>(limits_.header_timeout_seconds));
+  }
+}
+
+void ConnectionGate::Dispatch(std::unique_ptr<Connection> connection) {
+  connection->DropIgnorableHeaders(connection->HeaderLength());
+  ready_.push_back(std::move(connection));
+  ready_cv_.notify_one();
+}
+
+void ConnectionGate::Close(std::unique_ptr<Connection> connection) {
+  connection.reset();
+  counters_.open.fetch_sub(1, std::memory_order_relaxed);
+}
+
+void ConnectionGate::Refuse(std::unique_ptr<Connection> connection, ConnectionRefusal why) {
+  counters_.refused[static_cast<int>(why)].fetch_add(1, std::memory_order_relaxed);
+  const std::string response = refusal_(why);
+  // One attempt, never a wait: a client that does not read loses the explanation.
+  [[maybe_unused]] const ssize_t sent =
+      ::send(connection->fd(), response.data(), response.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
+  // Past max_connections nothing more is held for it.
+  if (why == ConnectionRefusal::kTooManyConnections) return Close(std::move(connection));
+  ::shutdown(connection->fd(), SHUT_WR);
+  Watch(std::move(connection), std::chrono::duration<double>(kLingerSeconds), false, true);
+}
+
+void ConnectionGate::PollLoop() {
+  constexpr int kMaxEvents = 256;
+  epoll_event events[kMaxEvents];
+  for (;;) {
+    // Deadlines are checked at least every 100 ms.
+    const int count = ::epoll_wait(epoll_fd_, events, kMaxEvents, 100);
+    std::lock_guard lock(mutex_);
+    if (stopping_) return;
+    for (int i = 0; i < count; ++i) {
+      if (events[i].data.fd != wake_fd_) OnReadable(events[i].data.fd);
+    }
+    const Clock::time_point now = Clock::now();
+    std::vector<int> expired;
+    for (const auto& [fd, waiting] : waiting_) {
+      if (waiting.deadline <= now) expired.push_back(fd);
+    }
+    for (const int fd : expired) {
+      const auto found = waiting_.find(fd);
+      ::epoll_ctl(epoll_fd_, EPOLL_CTL_DEL, fd, nullptr);
+      std::unique_ptr<Connection> taken = std::move(found->second.connection);
+      const bool idle = found->second.idle || found->second.draining;
+      waiting_.erase(found);
+      if (idle) {
+        Close(std::move(taken));
+      } else {
+        Refuse(std::move(taken), ConnectionRefusal::kHeaderTimeout);
+      }
+    }
+  }
+}
+
+void ConnectionGate::ServeLoop() {
+  for (;;) {
+    std::unique_ptr<Connection> connection;
+    {
+      std::unique_lock lock(mutex_);
+      ready_cv_.wait(lock, [this] { return stopping_ || !ready_.empty(); });
+      if (stopping_) return;
+      connection = std::move(ready_.front());
+      ready_.pop_front();
+    }
+    if (serve_(*connection)) {
+      Park(std::move(connection), true);
+    } else {
+      Close(std::move(connection));
+    }
+  }
+}
+
+void ConnectionGate::Stop() {
+  {
+    std::lock_guard lock(mutex_);
+    if (stopping_) return;
+    stopping_ = true;
+    stopping_flag_.store(true, std::memory_order_relaxed);
+    for (auto& [fd, waiting] : waiting_) Close(std::move(waiting.connection));
+    waiting_.clear();
+    while (!ready_.empty()) {
+      Close(std::move(ready_.front()));
+      ready_.pop_front();
+    }
+  }
+  ready_cv_.notify_all();
+  const uint64_t one = 1;
+  [[maybe_unused]] const ssize_t written = ::write(wake_fd_, &one, sizeof one);
+  if (poll_thread_.joinable()) poll_thread_.join();
+  for (std::thread& thread : serve_threads_) {
+    if (thread.joinable()) thread.join();
+  }
+}
+
+}  // namespace motionlod::server
