@@ -23,19 +23,58 @@ constexpr double kMaxFps = 1000.0;
 constexpr int kMaxFrames = 1000000;
 constexpr double kMaxMatrices = 1e7;  // about 1 GB of Affine34d
 
+// A BVH declares its joints and frames in plain text: counted before Assimp parses a
+// file that exceeds them (Assimp took minutes on 100,000 joints).
+Status PrecheckBvh(const SourceFile& main, const LoadOptions& options) {
+  const std::string_view text(main.bytes);
+  const size_t motion = text.find("MOTION");
+  const std::string_view hierarchy = text.substr(0, motion);
+  int64_t joints = 0;
+  for (const std::string_view keyword : {"ROOT", "JOINT"}) {
+    for (size_t at = hierarchy.find(keyword); at != std::string_view::npos;
+         at = hierarchy.find(keyword, at + keyword.size())) {
+      ++joints;
+    }
+  }
+  if (joints > options.max_joints) {
+    return InvalidArgument(Quote(main.name) + " declares " + std::to_string(joints) +
+                           " joints, more than the limit of " + std::to_string(options.max_joints) +
+                           " (max_joints)");
+  }
+  if (motion == std::string_view::npos) return Status::Ok();
+  const size_t frames_at = text.find("Frames:", motion);
+  if (frames_at == std::string_view::npos) return Status::Ok();
+  const double frames = std::strtod(main.bytes.c_str() + frames_at + 7, nullptr);
+  if (frames > static_cast<double>(options.max_frames)) {
+    return InvalidArgument(Quote(main.name) + " declares " + std::to_string(frames) +
+                           " frames, more than the limit of " + std::to_string(options.max_frames) +
+                           " (max_frames)");
+  }
+  return Status::Ok();
+}
+
 StatusOr<std::shared_ptr<const Asset>> Load(const SourceFile& main, const FileResolver& resolver,
                                             const LoadOptions& options) {
   if (Status s = options.Validate(); !s.ok()) return s;
   StatusOr<Format> format = DetectFormat(main.name, main.bytes, options.allowed_extensions);
   if (!format.ok()) return format.status();
+  if (*format == Format::kBvh) {
+    if (Status s = PrecheckBvh(main, options); !s.ok()) return s;
+  }
   StatusOr<Scene> scene = ImportScene(main.name, main.bytes, *format, resolver);
   if (!scene.ok()) return scene.status();
 
   auto impl = std::make_unique<Asset::Impl>();
   impl->warnings = scene->warnings;
-  StatusOr<Rig> rig = BuildRig(*scene, options.max_influences, main.name);
+  StatusOr<Rig> rig = BuildRig(*scene, options.max_influences, main.name, options.max_joints);
   if (!rig.ok()) return rig.status();
   impl->rig = std::move(rig).value();
+  const int64_t vertices = static_cast<int64_t>(impl->rig.character.skin.positions.size());
+  if (vertices > options.max_vertices) {
+    return InvalidArgument(Quote(main.name) + " has " + std::to_string(vertices) +
+                           " vertices, more than the limit of " +
+                           std::to_string(options.max_vertices) + " (max_vertices)");
+  }
   impl->warnings.insert(impl->warnings.end(), impl->rig.warnings.begin(), impl->rig.warnings.end());
   if (Status s = core::ValidateRawCharacter(impl->rig.character); !s.ok()) {
     return InvalidArgument(Quote(main.name) + " imports to an invalid character: " + s.message());
@@ -46,7 +85,19 @@ StatusOr<std::shared_ptr<const Asset>> Load(const SourceFile& main, const FileRe
   StatusOr<std::vector<Clip>> clips = BuildClips(*scene, is_joint_node, impl->warnings);
   if (!clips.ok()) return clips.status();
   impl->clips = std::move(clips).value();
-  for (const Clip& clip : impl->clips) impl->infos.push_back(clip.info);
+  int64_t frames = 0;
+  for (const Clip& clip : impl->clips) {
+    impl->infos.push_back(clip.info);
+    frames += clip.info.source_frame_count;
+  }
+  const int64_t joint_frames = frames * static_cast<int64_t>(impl->rig.joint_nodes.size());
+  if (frames > options.max_frames || joint_frames > options.max_joint_frames) {
+    return InvalidArgument(Quote(main.name) + "'s clips hold " + std::to_string(frames) +
+                           " frames of " + std::to_string(impl->rig.joint_nodes.size()) +
+                           " joints, more than the limit of " + std::to_string(options.max_frames) +
+                           " frames (max_frames) or " + std::to_string(options.max_joint_frames) +
+                           " joint frames (max_joint_frames)");
+  }
   impl->nodes = std::move(scene->nodes);
   return AssetFactory::Make(std::move(impl));
 }
@@ -68,6 +119,10 @@ Status LoadOptions::Validate() const {
                            std::to_string(max_influences));
   }
   if (max_total_bytes == 0) return InvalidArgument("max_total_bytes must be positive");
+  if (max_joints < 1 || max_vertices < 1 || max_frames < 1 || max_joint_frames < 1) {
+    return InvalidArgument("max_joints, max_vertices, max_frames and max_joint_frames must be "
+                           "positive");
+  }
   return Status::Ok();
 }
 

@@ -49,6 +49,14 @@ struct LoadOptions {
   int max_influences = 8;
   // Upper bound on the summed size of the files handed to LoadAsset.
   size_t max_total_bytes = size_t{512} << 20;
+  // What an asset may hold, so that memory follows configuration, not what a file
+  // declares: joints (checked before a proxy skin is made for them, and for a BVH before
+  // Assimp parses it), skin vertices, source frames over every clip, and joints times
+  // those frames.
+  int max_joints = 1024;
+  int64_t max_vertices = 2000000;
+  int64_t max_frames = 200000;
+  int64_t max_joint_frames = 4000000;
 
   Status Validate() const;
 };

@@ -403,18 +403,24 @@ StatusOr<uint64_t> WireMessageBytes(std::string_view bytes) {
   std::memcpy(&kind, bytes.data() + 10, 2);
   std::memcpy(&payload, bytes.data() + 16, 8);
   if (version != kAssetWireVersion)
-    return DataLoss("wire version " + std::to_string(version) + " is not 1");
+    return DataLoss("wire version " + std::to_string(version) + " is not " +
+                    std::to_string(kAssetWireVersion));
   if (kind < 1 || kind > 3) return DataLoss("unknown message kind " + std::to_string(kind));
   if (payload > UINT64_MAX - kWireHeaderBytes) return DataLoss("the declared size overflows");
   return payload + kWireHeaderBytes;
 }
 
-// Request payload: max_influences (i32), max_total_bytes (u64), allowed extensions
-// (strings), files (count, then each: name string, bytes as u64 size and bytes).
+// Request payload: max_influences (i32), max_total_bytes (u64), max_joints (i32),
+// max_vertices, max_frames, max_joint_frames (i64 each), allowed extensions (strings),
+// files (count, then each: name string, bytes as u64 size and bytes).
 std::string EncodeImportRequest(const std::vector<SourceFile>& files, const LoadOptions& options) {
   Writer w;
   w.Value(static_cast<int32_t>(options.max_influences));
   w.Value(static_cast<uint64_t>(options.max_total_bytes));
+  w.Value(static_cast<int32_t>(options.max_joints));
+  w.Value(static_cast<int64_t>(options.max_vertices));
+  w.Value(static_cast<int64_t>(options.max_frames));
+  w.Value(static_cast<int64_t>(options.max_joint_frames));
   w.Strings(options.allowed_extensions);
   w.Count(files.size());
   for (const SourceFile& f : files) {
@@ -431,6 +437,10 @@ StatusOr<ImportRequest> DecodeImportRequest(std::string_view message) {
   ImportRequest request;
   request.options.max_influences = r.Value<int32_t>();
   request.options.max_total_bytes = static_cast<size_t>(r.Value<uint64_t>());
+  request.options.max_joints = r.Value<int32_t>();
+  request.options.max_vertices = r.Value<int64_t>();
+  request.options.max_frames = r.Value<int64_t>();
+  request.options.max_joint_frames = r.Value<int64_t>();
   request.options.allowed_extensions = r.Strings(kMaxNameBytes, "extensions");
   request.files.resize(r.Count(4 + 8, "files"));
   for (SourceFile& f : request.files) {

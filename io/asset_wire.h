@@ -7,7 +7,7 @@
 // an Asset exists. A malformed reply is a DataLoss status, never a crash.
 //
 // A message is a 32-byte header and a payload, integers and IEEE-754 values little-endian:
-//   0  magic "MLODWIRE"     8  u16 version (1)     10 u16 kind (MessageKind)
+//   0  magic "MLODWIRE"     8  u16 version (2)     10 u16 kind (MessageKind)
 //   12 u32 reserved (0)     16 u64 payload bytes   24 u64 FNV-1a 64 of the payload
 // Strings and arrays are a count (u32, bytes for a string) followed by the elements.
 // The payload layouts are in asset_wire.cc next to the code that writes them.
@@ -25,7 +25,7 @@
 
 namespace motionlod::io {
 
-inline constexpr uint16_t kAssetWireVersion = 1;
+inline constexpr uint16_t kAssetWireVersion = 2;
 inline constexpr size_t kWireHeaderBytes = 32;
 
 enum class MessageKind : uint16_t {

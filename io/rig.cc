@@ -52,7 +52,8 @@ int FindInSubtree(const std::vector<SceneNode>& nodes, int top, const std::strin
 
 }  // namespace
 
-StatusOr<Rig> BuildRig(const Scene& scene, int max_influences, const std::string& name) {
+StatusOr<Rig> BuildRig(const Scene& scene, int max_influences, const std::string& name,
+                       int max_joints) {
   const std::vector<SceneNode>& nodes = scene.nodes;
   const int node_count = static_cast<int>(nodes.size());
   if (node_count == 0) return InvalidArgument(Quote(name) + " has no nodes");
@@ -130,6 +131,12 @@ StatusOr<Rig> BuildRig(const Scene& scene, int max_influences, const std::string
     for (int q = k; q >= 0 && q != root; q = nodes[q].parent) {
       if (!IsFbxHelperName(nodes[q].name)) is_joint[q] = 1;
     }
+  }
+  const auto joint_count = std::count(is_joint.begin(), is_joint.end(), 1);
+  if (joint_count > max_joints) {
+    return InvalidArgument(Quote(name) + " has " + std::to_string(joint_count) +
+                           " joints, more than the limit of " + std::to_string(max_joints) +
+                           " (max_joints)");
   }
   std::vector<int> joint_of_node(node_count, -1);
   core::RawSkeleton& skeleton = rig.character.skeleton;

@@ -29,6 +29,7 @@
 // normalised; a degenerate normal is replaced by the direction from the mesh centre.
 #pragma once
 
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -47,6 +48,8 @@ struct Rig {
 
 // Errors: InvalidArgument when the scene has no skeleton (no bone and no animated node)
 // or a bone offset is singular.
-StatusOr<Rig> BuildRig(const Scene& scene, int max_influences, const std::string& name);
+// More than `max_joints` joints is InvalidArgument, found before any proxy skin is made.
+StatusOr<Rig> BuildRig(const Scene& scene, int max_influences, const std::string& name,
+                       int max_joints = std::numeric_limits<int>::max());
 
 }  // namespace motionlod::io

@@ -42,6 +42,7 @@ Status BakeRequest::Validate() const {
   if (Status status = settings.Validate(); !status.ok()) return status;
   if (!(fps >= 0) || fps > 1000)
     return InvalidArgument("fps must be in [0, 1000] (0 = the source's)");
+  if (max_joint_frames < 1) return InvalidArgument("max_joint_frames must be positive");
   for (int count : levels) {
     if (count < 1) return InvalidArgument("every level must keep at least one joint");
   }
@@ -176,8 +177,30 @@ Status LiftCoarserLevels(const core::PreparedMotion& prepared,
 
 namespace {
 
-// A bake's clips together: as many joint matrices as one clip may hold (io::Asset).
-constexpr size_t kMaxClipMatrices = 10'000'000;
+// The joint matrices sampling `sources` at `fps` gives a character of `joints` joints:
+// InvalidArgument beyond `limit`. Clips not found are left to sampling to name.
+Status CheckClipMatrices(const io::Asset& character, const std::vector<ClipSource>& sources,
+                         double fps, int64_t limit) {
+  const double joints = static_cast<double>(character.character().skeleton.parents.size());
+  double matrices = 0;
+  for (const ClipSource& source : sources) {
+    const io::Asset& asset = source.motion ? *source.motion : character;
+    for (const io::AnimationInfo& info : asset.animations()) {
+      if (!source.animation.empty() && info.name != source.animation) continue;
+      const double rate = fps > 0 ? fps : info.source_fps;
+      matrices += (std::floor(info.duration_seconds * rate + 1e-6) + 1) * joints;
+      break;
+    }
+  }
+  if (matrices > static_cast<double>(limit)) {
+    return InvalidArgument("the clips at this frame rate hold " +
+                           std::to_string(static_cast<int64_t>(matrices)) +
+                           " joint matrices together, more than the limit of " +
+                           std::to_string(limit) +
+                           " (max_joint_frames): bake fewer clips or at a lower fps");
+  }
+  return Status::Ok();
+}
 
 // PrepareInputs for a validated request, on `pool`, without the motion's check: Bake's
 // core entry points (the ranking, PreparedMotion::Create) each make it first.
@@ -188,6 +211,11 @@ StatusOr<BakeInputs> PrepareInputsOn(const BakeRequest& request, TaskPool& pool)
   // The character and the motion are built side by side: the motion needs only the assets.
   const std::vector<ClipSource> sources =
       request.clips.empty() ? EveryClipOf(character_asset, nullptr, "") : request.clips;
+  if (Status s = CheckClipMatrices(character_asset, sources, request.fps,
+                                   request.max_joint_frames);
+      !s.ok()) {
+    return s;
+  }
   std::optional<StatusOr<std::shared_ptr<const core::Character>>> character;
   Status motion_status;
   std::vector<std::string> motion_warnings;
@@ -230,14 +258,6 @@ StatusOr<BakeInputs> PrepareInputsOn(const BakeRequest& request, TaskPool& pool)
     }
     if (clips.size() == 1) {
       inputs.motion = std::move(clips.front());
-      return;
-    }
-    size_t matrices = 0;
-    for (const core::Motion& clip : clips) matrices += clip.joint_world.size();
-    if (matrices > kMaxClipMatrices) {
-      motion_status = InvalidArgument(
-          "the clips hold " + std::to_string(matrices) + " joint matrices together, more than " +
-          std::to_string(kMaxClipMatrices) + ": bake fewer clips at once");
       return;
     }
     auto joined = core::ConcatenateClips(clips);

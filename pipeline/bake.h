@@ -51,6 +51,9 @@ struct BakeRequest {
   // them, matrices and figures per clip. Empty = every animation of the character's file.
   std::vector<ClipSource> clips;
   double fps = 0;  // 0 = the source's rate
+  // Joint matrices of every clip at `fps` together (joints x frames): InvalidArgument
+  // beyond, before any is sampled. Bounds a bake's motion memory (96 bytes a matrix).
+  int64_t max_joint_frames = 10'000'000;
   // Kept joint counts, any order (levels of the skeleton alone: the whole mesh, its own
   // influences, every frame); empty = the levels by cost (pipeline/cost_levels.h: the
   // cheapest within 1 px at each of a spread of heights). all_levels: every count from n

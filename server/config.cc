@@ -53,6 +53,13 @@ const std::vector<OptionSpec>& Specs() {
        "upload bodies received at once"},
       {"limits", "max_concurrent_imports", &Config::max_concurrent_imports,
        "uploads imported at once"},
+      {"limits", "max_joints", &Config::max_joints, "joints of one upload (422 beyond)"},
+      {"limits", "max_vertices", &Config::max_vertices, "skin vertices of one upload"},
+      {"limits", "max_frames", &Config::max_frames, "source frames of one upload's clips"},
+      {"limits", "max_joint_frames", &Config::max_joint_frames,
+       "joints times source frames of one upload"},
+      {"limits", "max_export_bytes", &Config::max_export_bytes,
+       "a level's glTF file (422 beyond)"},
       {"limits", "max_streams", &Config::max_streams, "open SSE streams and long-polls together"},
       {"limits", "max_wait_seconds", &Config::max_wait_seconds, "cap of ?wait= on job status"},
       {"limits", "max_stream_seconds", &Config::max_stream_seconds, "longest SSE stream"},
@@ -225,6 +232,12 @@ Status Config::Validate() const {
     return InvalidArgument("max_upload_parts must be in [1, 1000]");
   if (max_concurrent_imports < 1)
     return InvalidArgument("max_concurrent_imports must be at least 1");
+  if (max_joints < 2 || max_joints > 65535)
+    return InvalidArgument("max_joints must be in [2, 65535]");
+  if (max_vertices < 1 || max_frames < 1 || max_joint_frames < 1 || max_export_bytes < 1) {
+    return InvalidArgument(
+        "max_vertices, max_frames, max_joint_frames and max_export_bytes must be positive");
+  }
   if (max_concurrent_uploads < 1)
     return InvalidArgument("max_concurrent_uploads must be at least 1");
   if (max_streams < 0 || max_streams >= http_threads) {

@@ -51,6 +51,13 @@ struct Config {
   int max_concurrent_uploads = 8;   // upload bodies being received at once (503 beyond):
                                     // bounds their memory to this x max_upload_bytes
   int max_concurrent_imports = 2;   // uploads imported at once (503 beyond)
+  // What one character or motion may hold (422 beyond), checked by the import worker
+  // before the daemon holds any of it: memory follows these, not what a file declares.
+  int max_joints = 1024;
+  int64_t max_vertices = 2000000;
+  int64_t max_frames = 200000;          // source frames over every clip
+  int64_t max_joint_frames = 4000000;   // joints x those frames
+  int64_t max_export_bytes = int64_t{64} << 20;  // a level's glTF file, bounded before it is built
   int max_streams = 4;              // open SSE streams and long-polls together (503 beyond)
   double max_wait_seconds = 30;     // cap of ?wait= on GET /v1/jobs/{id}
   double max_stream_seconds = 300;  // an SSE stream ends after this (clients reconnect)

@@ -266,6 +266,7 @@ void Jobs::Run(const std::string& id) {
   if (clips.empty()) return fail("internal", "the stored bake names no clip");
   pipeline::BakeRequest p = MakePipelineRequest(*request, std::move(clips),
                                                 context_.config.bake_threads, context_.config.simd);
+  p.max_joint_frames = context_.config.max_joint_frames;
   auto character_asset = context_.LoadSource((*character)->id, (*character)->files);
   if (!character_asset.ok())
     return fail(StatusCodeName(character_asset.status().code()),

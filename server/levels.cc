@@ -270,10 +270,27 @@ Result<Levels::GltfFile> Levels::GetGltf(const std::string& bake_id, const GltfP
   if (!character.ok()) return character.error();
   auto asset = context_.LoadSource(character->id, character->files);
   if (!asset.ok()) return Internal(asset.status());
+  // A bound from above on the file, before it is built: the level's matrices become a
+  // translation, rotation and scale per joint and frame (40 of its 48 bytes), and its mesh
+  // is at most the character's (positions, normals, joints, weights: 48 bytes a vertex).
+  const core::RawSkin& skin = (*asset)->character().skin;
+  const int64_t bound = static_cast<int64_t>(one_level->bytes->size()) +
+                        48 * static_cast<int64_t>(skin.positions.size()) +
+                        12 * static_cast<int64_t>(skin.triangles.size());
+  if (bound > context_.config.max_export_bytes) {
+    return Error(ErrorKind::kUnprocessable,
+                 "the glTF file of this level could reach " + std::to_string(bound >> 20) +
+                     " MiB, more than max_export_bytes (" +
+                     std::to_string(context_.config.max_export_bytes >> 20) +
+                     " MiB); export it with the motionlod tool instead");
+  }
   auto exported = pipeline::ExportLevelGltf(**asset, *one_level->bytes, {.index = 0}, animation);
   if (!exported.ok()) return Internal(exported.status());
   file.glb = std::make_shared<const std::string>(std::move(exported->glb));
-  context_.cache.Put(file.key, file.glb);
+  // Level files come first: one export may take at most an eighth of the cache.
+  if (static_cast<int64_t>(file.glb->size()) <= context_.config.cache_bytes / 8) {
+    context_.cache.Put(file.key, file.glb);
+  }
   return file;
 }
 

@@ -70,6 +70,10 @@ StatusOr<std::shared_ptr<const io::Asset>> ServiceContext::Import(
     const std::vector<io::SourceFile>& files) {
   io::LoadOptions options;
   options.max_total_bytes = static_cast<size_t>(config.max_upload_bytes);
+  options.max_joints = config.max_joints;
+  options.max_vertices = config.max_vertices;
+  options.max_frames = config.max_frames;
+  options.max_joint_frames = config.max_joint_frames;
   return importer->Import(files, options);
 }
 

@@ -10,6 +10,7 @@
 #include "core/character.h"
 #include "core/motion.h"
 #include "gltf_fixture.h"
+#include "tests/fixtures/flat_bvh.h"
 #include "test_util.h"
 
 namespace motionlod::io {
@@ -186,7 +187,8 @@ TEST(SampleAnimation, ThreadsSplitTheFramesWithoutChangingThem) {
       ASSERT_EQ(split.frame_count, one.frame_count) << file;
       ASSERT_EQ(split.joint_world.size(), one.joint_world.size()) << file;
       for (size_t q = 0; q < one.joint_world.size(); ++q) {
-        ASSERT_EQ(split.joint_world[q], one.joint_world[q]) << file << " " << threads << " matrix " << q;
+        ASSERT_EQ(split.joint_world[q], one.joint_world[q])
+            << file << " " << threads << " matrix " << q;
       }
     }
   }
@@ -423,6 +425,46 @@ TEST(LoadAsset, RejectsBadOptions) {
   options.allowed_extensions = {"obj"};
   EXPECT_EQ(LoadAsset({{"a.gltf", "{}"}}, options).status().code(), StatusCode::kInvalidArgument);
   EXPECT_EQ(LoadAsset({}).status().code(), StatusCode::kInvalidArgument);
+}
+
+TEST(LoadAsset, LimitsOnJointsVerticesAndFramesRefuseTheAsset) {
+  using motionlod::testing::FlatBvh;
+  const std::string bvh = FlatBvh(50, 10);
+  ASSERT_TRUE(LoadAsset({{"flat.bvh", bvh}}).ok());
+  const auto refused = [](const std::string& name, const std::string& bytes,
+                          const LoadOptions& options, const std::string& message) {
+    const auto asset = LoadAsset({{name, bytes}}, options);
+    ASSERT_FALSE(asset.ok()) << message;
+    EXPECT_EQ(asset.status().code(), StatusCode::kInvalidArgument);
+    EXPECT_NE(asset.status().message().find(message), std::string::npos)
+        << asset.status().message();
+  };
+  // A BVH's declared joints and frames are counted before Assimp parses it: a file of
+  // 20,000 joints (3 MB, which Assimp turned into a 3 M-vertex proxy skin) is refused.
+  refused("flat.bvh", FlatBvh(20000, 2), {},
+          "declares 20000 joints, more than the limit of 1024 "
+          "(max_joints)");
+  LoadOptions options;
+  options.max_joints = 40;
+  refused("flat.bvh", bvh, options, "declares 50 joints");
+  options = {};
+  options.max_frames = 9;
+  refused("flat.bvh", bvh, options, "(max_frames)");
+  options = {};
+  options.max_joint_frames = 499;  // 50 joints x 10 frames
+  refused("flat.bvh", bvh, options, "10 frames of 50 joints");
+  // Other formats: joints found when the skeleton is built, vertices once the skin is.
+  const std::string sample = testing::ReadBytes(std::filesystem::path(MOTIONLOD_SOURCE_DIR) /
+                                       "samples/Rig_Medium_MovementBasic.glb");
+  options = {};
+  options.max_joints = 10;
+  refused("rig.glb", sample, options, "has 23 joints, more than the limit of 10");
+  options = {};
+  options.max_vertices = 1000;
+  refused("rig.glb", sample, options, "(max_vertices)");
+  options = {};
+  options.max_joints = 0;
+  refused("rig.glb", sample, options, "must be positive");
 }
 
 }  // namespace

@@ -157,7 +157,7 @@ TEST(AssetWire, WrongKindAndVersionAreRefused) {
   const std::string request = EncodeImportRequest({}, LoadOptions{});
   ExpectMalformed(DecodeImportReply(request));  // a request is no reply
   std::string version = EncodeImportReply(Status(StatusCode::kDataLoss, "x"));
-  version[8] = 2;
+  version[8] = static_cast<char>(kAssetWireVersion + 1);
   ExpectMalformed(DecodeImportReply(version));
   EXPECT_EQ(DecodeImportRequest("MLODWIRE").status().code(), StatusCode::kDataLoss);
 }

@@ -17,12 +17,6 @@
 namespace motionlod::server::testing {
 namespace {
 
-httplib::Result UploadBytes(httplib::Client& client, const std::string& name,
-                            const std::string& bytes) {
-  return client.Post(("/v1/characters?filename=" + name).c_str(), bytes,
-                     "application/octet-stream");
-}
-
 TEST(DaemonImport, UploadsAreImportedInTheSandboxWithTheInProcessResult) {
   Daemon daemon(TestDirectory());
   ASSERT_TRUE(daemon.Start()) << daemon.error;

@@ -51,11 +51,15 @@ inline httplib::Headers Auth(const std::string& key) {
   return key.empty() ? httplib::Headers{} : httplib::Headers{{"Authorization", "Bearer " + key}};
 }
 
-// POST /v1/characters with the raw file.
+// POST /v1/characters with raw bytes, or a file's.
+inline httplib::Result UploadBytes(httplib::Client& client, const std::string& name,
+                                   const std::string& bytes, const std::string& key = "") {
+  return client.Post(("/v1/characters?filename=" + name).c_str(), Auth(key), bytes,
+                     "application/octet-stream");
+}
 inline httplib::Result UploadFile(httplib::Client& client, const std::string& path,
                                   const std::string& name, const std::string& key = "") {
-  return client.Post(("/v1/characters?filename=" + name).c_str(), Auth(key), ReadFile(path),
-                     "application/octet-stream");
+  return UploadBytes(client, name, ReadFile(path), key);
 }
 
 inline httplib::Result SubmitBake(httplib::Client& client, const json& request,
