@@ -16,6 +16,7 @@ enum class StatusCode {
   kUnsupported,         // well-formed input that this build cannot handle
   kDataLoss,            // truncated or corrupted bytes
   kCancelled,           // the caller asked the work to stop
+  kUnavailable,         // a resource failed for now (a full or unwritable disk): retry later
   kInternal,            // a bug: an invariant of ours did not hold
 };
 

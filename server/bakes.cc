@@ -226,6 +226,31 @@ Result<Created<api::JobStatus>> Bakes::Submit(const api::BakeRequest& request) {
   auto inserted = context_.store->InsertBakeAndJob(bake, job);
   if (!inserted.ok()) return Internal(inserted.status());
   if (!*inserted) {
+    auto existing = context_.store->GetJob(key.id);
+    if (!existing.ok()) return Internal(existing.status());
+    // A bake that failed to store its result runs again when asked again.
+    if (existing->has_value() && (*existing)->state == "failed" &&
+        (*existing)->error_code == "storage") {
+      JobRecord retry = **existing;
+      retry.state = "queued";
+      retry.error_code.clear();
+      retry.error_detail.clear();
+      retry.progress = 0;
+      retry.stage.clear();
+      retry.created_ms = now;
+      retry.started_ms = 0;
+      retry.finished_ms = 0;
+      auto updated = context_.store->UpdateJob(retry);
+      if (!updated.ok()) return Internal(updated.status());
+      if (auto queued = jobs_.Enqueue(retry); !queued.ok()) {
+        (void)context_.store->UpdateJob(**existing);  // still failed: asked again later
+        return queued.error();
+      }
+      spdlog::info("bake {} queued again after a storage fault", key.id);
+      auto status = jobs_.Get(key.id);
+      if (!status.ok()) return status.error();
+      return Created<api::JobStatus>{status.value(), true};
+    }
     auto status = jobs_.Get(key.id);
     if (!status.ok()) return status.error();
     return Created<api::JobStatus>{status.value(), false};

@@ -1,6 +1,7 @@
 #include "server/blob_store.h"
 
 #include <fcntl.h>
+#include <sys/statvfs.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -18,8 +19,9 @@ namespace fs = std::filesystem;
 
 constexpr const char* kTempPrefix = ".tmp-";
 
+// The file system failed (full, read-only, unwritable): the same call may work later.
 Status Errno(const std::string& what) {
-  return Status(StatusCode::kInternal, what + ": " + std::strerror(errno));
+  return Status(StatusCode::kUnavailable, what + ": " + std::strerror(errno));
 }
 
 Status FsyncPath(const fs::path& path, int flags) {
@@ -52,6 +54,28 @@ Status EnsureDirectory(const fs::path& dir) {
 }
 
 }  // namespace
+
+Status BlobStore::CheckWritable(int64_t min_free_bytes) const {
+  struct statvfs space {};
+  if (::statvfs(root_.c_str(), &space) == 0) {
+    const auto free_bytes = static_cast<int64_t>(space.f_bavail) * static_cast<int64_t>(space.f_frsize);
+    if (free_bytes < min_free_bytes) {
+      return Status(StatusCode::kUnavailable,
+                    "the data directory has " + std::to_string(free_bytes >> 20) +
+                        " MiB free, less than min_free_bytes (" +
+                        std::to_string(min_free_bytes >> 20) + " MiB)");
+    }
+  }
+  std::string probe = (root_ / "sha256" / (std::string(kTempPrefix) + "XXXXXX")).string();
+  const int fd = ::mkostemp(probe.data(), O_CLOEXEC);
+  if (fd < 0) {
+    return Status(StatusCode::kUnavailable,
+                  std::string("the data directory is not writable: ") + std::strerror(errno));
+  }
+  ::close(fd);
+  ::unlink(probe.c_str());
+  return Status::Ok();
+}
 
 StatusOr<std::unique_ptr<BlobStore>> BlobStore::Open(const fs::path& root) {
   std::error_code error;

@@ -34,6 +34,10 @@ class BlobStore {
   // Removes the blob (absent is fine).
   Status Remove(std::string_view hash);
 
+  // Unavailable (naming no path) when a file cannot be created under the root now, or
+  // the file system has less than `min_free_bytes` free: what /readyz reports.
+  Status CheckWritable(int64_t min_free_bytes) const;
+
   // Every stored hash (for garbage collection at start).
   std::vector<std::string> List() const;
 

@@ -34,6 +34,8 @@ const std::vector<OptionSpec>& Specs() {
        "open connections, idle included (503 beyond)"},
       {"server", "web_root", &Config::web_root, "built web viewer served at / (empty: none)"},
       {"storage", "data_dir", &Config::data_dir, "database and content-addressed blobs"},
+      {"storage", "min_free_bytes", &Config::min_free_bytes,
+       "free space below which /readyz is 503"},
       {"jobs", "threads", &Config::threads, "bake workers (0: one per hardware thread)"},
       {"jobs", "bake_threads", &Config::bake_threads,
        "threads inside one bake (0: one per hardware thread)"},
@@ -216,6 +218,7 @@ Status Config::Validate() const {
   if (max_connections < http_threads || max_connections > 1 << 20)
     return InvalidArgument("max_connections must be in [http_threads, 1048576]");
   if (data_dir.empty()) return InvalidArgument("data_dir must not be empty");
+  if (min_free_bytes < 0) return InvalidArgument("min_free_bytes must be >= 0");
   if (threads < 0 || threads > 256) return InvalidArgument("threads must be in [0, 256]");
   if (bake_threads < 0 || bake_threads > 256)
     return InvalidArgument("bake_threads must be in [0, 256]");

@@ -28,6 +28,7 @@ struct Config {
 
   // Storage.
   std::string data_dir = "motionlodd-data";
+  int64_t min_free_bytes = int64_t{64} << 20;  // free space below which /readyz says not ready
 
   // Jobs.
   int threads = 0;            // bake workers draining the queue; 0: one per hardware thread

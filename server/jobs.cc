@@ -221,6 +221,15 @@ void Jobs::Run(const std::string& id) {
     ++context_.bake_metrics.failed;
     spdlog::warn("bake {} failed: {}: {}", id, code, detail);
   };
+  // A storage fault is told without the server's paths (the log has them), as 'storage':
+  // the same bake submitted again runs again.
+  const auto fail_with = [&](const Status& status) {
+    if (status.code() != StatusCode::kUnavailable) {
+      return fail(StatusCodeName(status.code()), status.message());
+    }
+    spdlog::error("bake {}: {}", id, status.message());
+    fail("storage", std::string(kStorageFaultDetail) + "; submit the same bake again to rerun it");
+  };
   auto bake = store.GetBake(id);
   if (!bake.ok()) return fail("internal", bake.status().message());
   if (!bake->has_value()) return Publish(job, true);
@@ -252,9 +261,7 @@ void Jobs::Run(const std::string& id) {
       std::shared_ptr<const io::Asset>& file = motion_files[m.source_id];
       if (!file) {
         auto motion_asset = context_.LoadSource(m.source_id, m.files);
-        if (!motion_asset.ok())
-          return fail(StatusCodeName(motion_asset.status().code()),
-                      motion_asset.status().message());
+        if (!motion_asset.ok()) return fail_with(motion_asset.status());
         file = *motion_asset;
       }
       clip.motion = file;
@@ -268,9 +275,7 @@ void Jobs::Run(const std::string& id) {
                                                 context_.config.bake_threads, context_.config.simd);
   p.max_joint_frames = context_.config.max_joint_frames;
   auto character_asset = context_.LoadSource((*character)->id, (*character)->files);
-  if (!character_asset.ok())
-    return fail(StatusCodeName(character_asset.status().code()),
-                character_asset.status().message());
+  if (!character_asset.ok()) return fail_with(character_asset.status());
   p.character = *character_asset;
   p.character_label = (*character)->name;
   p.source_hash = MakeBakeKey(*request, identities, p.settings.Hash()).source_hash;
@@ -299,7 +304,7 @@ void Jobs::Run(const std::string& id) {
     }
     return Publish(job, true);
   }
-  if (!output.ok()) return fail(StatusCodeName(output.status().code()), output.status().message());
+  if (!output.ok()) return fail_with(output.status());
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   job.stage = "store";
@@ -307,7 +312,7 @@ void Jobs::Run(const std::string& id) {
   if (Status status = FinishBake(**bake, std::move(*output), job, written); !status.ok()) {
     context_.CollectBlobs(written);  // what no row names (the bake was deleted meanwhile)
     if (status.code() == StatusCode::kNotFound) return Publish(job, true);
-    return fail("internal", status.message());
+    return fail_with(status);
   }
   context_.bake_metrics.seconds.Observe(seconds);
   ++context_.bake_metrics.succeeded;

@@ -433,11 +433,10 @@ http::Router MakeRouter(const RouteContext& context) {
   });
   router.Add("GET", "/readyz", Access::kPublic, [&service](Request& request, Response& response) {
     response.SetHeader("Cache-Control", "no-store");
-    if (service.Ready()) return response.SetJson(200, R"({"status":"ready"})");
+    const Status ready = service.Ready();
+    if (ready.ok()) return response.SetJson(200, R"({"status":"ready"})");
     response.SetHeader("Retry-After", "5");
-    http::SetProblem(
-        request, response, 503,
-        service.draining() ? "the daemon is shutting down" : "the daemon is not ready");
+    http::SetProblem(request, response, 503, ready.message());
   });
   router.Add("GET", "/metrics", Access::kRead, [&service, context](Request&, Response& response) {
     std::string text;

@@ -65,8 +65,12 @@ void Service::BeginDrain() { jobs_.BeginDrain(); }
 
 void Service::Shutdown() { jobs_.Shutdown(); }
 
-bool Service::Ready() {
-  return !jobs_.draining() && jobs_.queue() != nullptr && context_.store->Healthy();
+Status Service::Ready() {
+  if (jobs_.draining()) return Status(StatusCode::kUnavailable, "the daemon is shutting down");
+  if (jobs_.queue() == nullptr) return Status(StatusCode::kUnavailable, "the daemon is starting");
+  if (!context_.store->Healthy())
+    return Status(StatusCode::kUnavailable, "the database does not answer");
+  return context_.blobs->CheckWritable(context_.config.min_free_bytes);
 }
 
 void Service::RenderMetrics(std::string& out) {

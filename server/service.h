@@ -49,7 +49,10 @@ class Service {
   Jobs& jobs() { return jobs_; }
   Levels& levels() { return levels_; }
 
-  bool Ready();
+  // Ok when the daemon takes work: not draining, the queue started, the database
+  // answering, the data directory writable with min_free_bytes free. Otherwise why not,
+  // in words that name no server path.
+  Status Ready();
   // Queue, jobs, bakes and cache metrics in Prometheus text.
   void RenderMetrics(std::string& out);
 

@@ -18,6 +18,10 @@ ServiceError Error(ErrorKind kind, std::string detail, int retry_after) {
 }
 
 ServiceError Internal(const Status& status) {
+  if (status.code() == StatusCode::kUnavailable) {
+    spdlog::error("storage error: {}", status.message());
+    return Error(ErrorKind::kUnavailable, kStorageFaultDetail, 30);
+  }
   spdlog::error("internal error: {}", status.message());
   return Error(ErrorKind::kInternal, "internal error; see the daemon's log");
 }

@@ -58,7 +58,12 @@ struct Done {};
 ServiceError Error(ErrorKind kind, std::string detail, int retry_after = 0);
 
 // An internal error: logged with its message, answered without it.
+// An internal failure as the client sees it: 503 with kStorageFaultDetail when the data
+// directory failed (kUnavailable), else a 500 pointing at the log (where the message goes).
 ServiceError Internal(const Status& status);
+// What a client is told of a storage fault: no server path, and what to do.
+inline constexpr const char* kStorageFaultDetail =
+    "the daemon's data directory cannot be written now (full or read-only); retry later";
 
 // The 404 for an id that cannot name anything (not 64 lower-case hex digits), answered
 // before any lookup.

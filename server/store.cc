@@ -23,8 +23,15 @@ CREATE TABLE bake_clips (
 CREATE INDEX bake_clips_motion ON bake_clips(motion_id);
 )sql";
 
+// A full disk, an I/O error or a read-only file is the file system's failure, which may
+// pass (kUnavailable); anything else is ours (kInternal).
 Status SqlError(sqlite3* db, const std::string& what) {
-  return Status(StatusCode::kInternal, "database: " + what + ": " + sqlite3_errmsg(db));
+  const int primary = sqlite3_errcode(db) & 0xff;
+  const bool transient = primary == SQLITE_FULL || primary == SQLITE_IOERR ||
+                         primary == SQLITE_READONLY || primary == SQLITE_CANTOPEN ||
+                         primary == SQLITE_BUSY;
+  return Status(transient ? StatusCode::kUnavailable : StatusCode::kInternal,
+                "database: " + what + ": " + sqlite3_errmsg(db));
 }
 
 // One prepared statement; binds by position (1-based), reads columns by index.

@@ -44,6 +44,7 @@ TEST(Config, TheShippedConfigFileParsesAndDocumentsEveryOption) {
                           "max_connections",
                           "web_root",
                           "data_dir",
+                          "min_free_bytes",
                           "threads",
                           "bake_threads",
                           "queue_capacity",

@@ -251,6 +251,48 @@ TEST_F(HostileHttp, SlowClientsAreCutOffAndDoNotHoldTheDaemon) {
   ExpectServing(*daemon_);
 }
 
+TEST_F(HostileHttp, AResetStreamClientFreesItsSlotWithinAboutASecond) {
+  // One stream slot, one bake worker: a long bake runs, a second waits behind it, and
+  // its event stream stays open as long as it waits.
+  StartDaemon({"--max-streams", "1", "--threads", "1"});
+  auto client = daemon_->Client();
+  ASSERT_EQ(UploadFile(*client, Sample(), "rig.glb")->status, 201);
+  std::vector<std::string> ids;
+  for (const char* motion : {"Jump_Full_Long", "Walking_A"}) {
+    auto submitted = SubmitBake(
+        *client,
+        {{"character", kSampleId}, {"motion", motion}, {"all_levels", true}, {"fps", 800}});
+    ASSERT_TRUE(submitted);
+    ASSERT_EQ(submitted->status, 202) << submitted->body;
+    ids.push_back(Json(submitted)["id"]);
+  }
+  const std::string request =
+      "GET /v1/jobs/" + ids.back() + "/events HTTP/1.1\r\nHost: x\r\n\r\n";
+  auto stream = std::make_unique<RawConnection>(port_);
+  ASSERT_TRUE(stream->Send(request));
+  ASSERT_EQ(stream->ReadStatus(), 200);
+  RawConnection refused(port_);
+  refused.Send(request);
+  EXPECT_EQ(refused.ReadStatus(), 503);  // the one slot is taken
+
+  // The client resets its connection: the stream's next write (a comment each second
+  // without news) fails and frees the slot.
+  stream->Reset();
+  const auto reset_at = std::chrono::steady_clock::now();
+  int status = 0;
+  while (status != 200 && std::chrono::steady_clock::now() - reset_at < std::chrono::seconds(10)) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    RawConnection next(port_);
+    next.Send(request);
+    status = next.ReadStatus();
+  }
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - reset_at).count();
+  std::printf("a reset stream client's slot was free again after %.2f s\n", seconds);
+  EXPECT_EQ(status, 200);
+  EXPECT_LT(seconds, 2.5);
+}
+
 TEST_F(HostileHttp, PathLikeAndOverlongIdsAreRefusedBeforeAnyLookup) {
   StartDaemon();
   auto client = daemon_->Client();

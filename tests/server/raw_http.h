@@ -101,6 +101,23 @@ class RawConnection {
     return reply;
   }
 
+  // The status line and headers of a response whose body may never end (a stream): its
+  // status, 0 when none came.
+  int ReadStatus() {
+    while (buffer_.find("\r\n\r\n") == std::string::npos) {
+      if (!Receive()) return 0;
+    }
+    return buffer_.rfind("HTTP/1.1 ", 0) == 0 ? std::atoi(buffer_.c_str() + 9) : 0;
+  }
+
+  // Closes with a reset (SO_LINGER 0), as a client that crashed or lost its network.
+  void Reset() {
+    linger hard{1, 0};
+    ::setsockopt(fd_, SOL_SOCKET, SO_LINGER, &hard, sizeof hard);
+    ::close(fd_);
+    fd_ = -1;
+  }
+
   // Waits for the daemon to close the connection (reading and dropping what comes).
   bool ClosedByDaemon() {
     while (Receive()) {
