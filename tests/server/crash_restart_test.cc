@@ -127,6 +127,7 @@ TEST(CrashRestart, BakesSurviveTwelveRandomSigkillsCompletingExactlyOnce) {
     ++levels_verified;
   };
 
+  int kills_on_work = 0;  // kills that came while a bake ran and another waited
   for (int kill = 0; kill < kKills; ++kill) {
     const int delay_ms = std::uniform_int_distribution<int>(0, 300)(random);
     std::atomic<bool> killed{false};
@@ -135,9 +136,12 @@ TEST(CrashRestart, BakesSurviveTwelveRandomSigkillsCompletingExactlyOnce) {
       // the daemon's gauges say when, then the random delay.
       auto watcher = daemon.Client();
       const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
-      while (std::chrono::steady_clock::now() < deadline &&
-             !(Gauge(*watcher, "motionlodd_jobs_running") >= 1 &&
-               Gauge(*watcher, "motionlodd_queue_depth") >= 1)) {
+      while (std::chrono::steady_clock::now() < deadline) {
+        if (Gauge(*watcher, "motionlodd_jobs_running") >= 1 &&
+            Gauge(*watcher, "motionlodd_queue_depth") >= 1) {
+          ++kills_on_work;
+          break;
+        }
         std::this_thread::sleep_for(std::chrono::milliseconds(10));
       }
       std::this_thread::sleep_for(std::chrono::milliseconds(delay_ms));
@@ -152,10 +156,16 @@ TEST(CrashRestart, BakesSurviveTwelveRandomSigkillsCompletingExactlyOnce) {
 
   // The last run: everything not yet accepted is submitted, then every bake finishes.
   while (next_request < requests.size()) work_once(*client);
+  int reruns = 0;  // runs beyond the first: a kill cut the bake while it ran
   for (const auto& [id, request] : accepted) {
     const json finished = WaitForJob(*client, id, 300);
     ASSERT_EQ(finished.value("state", ""), "succeeded") << id << ": " << finished.dump();
+    reruns += finished.value("attempts", 1) - 1;
   }
+  // Every kill came while bakes ran and waited (a random 0-300 ms later), and kills cut
+  // running bakes, which ran again.
+  EXPECT_EQ(kills_on_work, kKills);
+  EXPECT_GE(reruns, kKills / 3);
   auto listed = client->Get("/v1/bakes");
   ASSERT_TRUE(listed);
   ASSERT_EQ(listed->status, 200) << listed->body;
@@ -189,11 +199,9 @@ TEST(CrashRestart, BakesSurviveTwelveRandomSigkillsCompletingExactlyOnce) {
   EXPECT_GE(blobs, static_cast<int>(accepted.size()));  // at least one level per bake
   EXPECT_EQ(accepted.size(), requests.size());
   EXPECT_GT(levels_verified, 0);
-  // The kills landed on queued and running bakes: most restarts found jobs to requeue
-  // (queued or running at the kill), and bakes were run again after a kill cut them.
-  EXPECT_GE(Count(log, "unfinished jobs"), kKills / 2);
-  EXPECT_GE(Count(log, " running (attempt 2)"), kKills / 4);
-  std::cout << "runs that requeued interrupted jobs " << Count(log, "unfinished jobs")
+  // Log lines within a second of a SIGKILL may be lost (the log is flushed each second).
+  std::cout << "bakes run again after a kill cut them " << reruns
+            << ", runs that requeued interrupted jobs " << Count(log, "unfinished jobs")
             << ", runs that removed unreferenced blobs " << Count(log, "unreferenced blobs")
             << ", bake starts logged " << Count(log, " running (attempt") << "\n";
   std::cout << "kills " << kKills << ", bakes " << accepted.size() << " (" << seen_succeeded.size()
