@@ -13,6 +13,7 @@ packages=(
   chromium  # the web viewer's end-to-end test drives it (never a downloaded browser)
   bubblewrap libseccomp-dev  # the import worker's sandbox and its seccomp filter (server/import_sandbox.h)
   clang libclang-rt-14-dev  # libFuzzer targets (scripts/fuzz.sh)
+  nginx-light  # the reverse proxy of deploy/nginx/, run by the slow-client test
 )
 # The web viewer builds with Node.js (18 or later): Debian's, unless one is installed.
 command -v node >/dev/null || packages+=(nodejs npm)

@@ -1,0 +1,103 @@
+#include "tests/server/nginx.h"
+
+#include <netinet/in.h>
+#include <signal.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <fstream>
+#include <thread>
+
+#include "tests/server/daemon.h"
+
+namespace motionlod::server::testing {
+namespace {
+
+constexpr const char* kBinary = "/usr/sbin/nginx";
+
+// A loopback port free now (the kernel's choice for a socket bound to port 0).
+int FreePort() {
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in address{};
+  address.sin_family = AF_INET;
+  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  socklen_t length = sizeof address;
+  int port = 0;
+  if (::bind(fd, reinterpret_cast<sockaddr*>(&address), sizeof address) == 0 &&
+      ::getsockname(fd, reinterpret_cast<sockaddr*>(&address), &length) == 0) {
+    port = ntohs(address.sin_port);
+  }
+  ::close(fd);
+  return port;
+}
+
+bool Accepts(int port) {
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in address{};
+  address.sin_family = AF_INET;
+  address.sin_port = htons(static_cast<uint16_t>(port));
+  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  const bool connected = ::connect(fd, reinterpret_cast<sockaddr*>(&address), sizeof address) == 0;
+  ::close(fd);
+  return connected;
+}
+
+void Replace(std::string& text, const std::string& from, const std::string& to) {
+  const size_t at = text.find(from);
+  if (at != std::string::npos) text.replace(at, from.size(), to);
+}
+
+}  // namespace
+
+bool Nginx::Installed() { return ::access(kBinary, X_OK) == 0; }
+
+Nginx::~Nginx() {
+  if (pid_ <= 0) return;
+  ::kill(pid_, SIGTERM);
+  int status = 0;
+  ::waitpid(pid_, &status, 0);
+}
+
+bool Nginx::Start(int daemon_port) {
+  std::filesystem::create_directories(dir_ / "logs");
+  port_ = FreePort();
+  std::string site = ReadFile(SourcePath("deploy/nginx/motionlod.conf"));
+  Replace(site, "listen 8080", "listen 127.0.0.1:" + std::to_string(port_));
+  Replace(site, "server 127.0.0.1:8081", "server 127.0.0.1:" + std::to_string(daemon_port));
+  std::ofstream(dir_ / "motionlod.conf") << site;
+  const std::string prefix = dir_.string() + "/";
+  std::ofstream(dir_ / "nginx.conf")
+      << (::geteuid() == 0 ? "user root;\n" : "")  // workers write the temporary files here
+      << "worker_processes 1;\nworker_rlimit_nofile 16384;\npid " << prefix
+      << "nginx.pid;\nerror_log " << prefix << "logs/error.log warn;\n"
+      << "events { worker_connections 8192; }\n"
+      << "http {\n  access_log off;\n  client_body_temp_path " << prefix << "body;\n"
+      << "  proxy_temp_path " << prefix << "proxy;\n  fastcgi_temp_path " << prefix
+      << "fastcgi;\n  uwsgi_temp_path " << prefix << "uwsgi;\n  scgi_temp_path " << prefix
+      << "scgi;\n  include " << prefix << "motionlod.conf;\n}\n";
+  const std::string config = (dir_ / "nginx.conf").string();
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    ::execl(kBinary, kBinary, "-p", prefix.c_str(), "-c", config.c_str(), "-g", "daemon off;",
+            static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  if (pid < 0) return false;
+  pid_ = pid;
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  while (std::chrono::steady_clock::now() < deadline) {
+    if (Accepts(port_)) return true;
+    int status = 0;
+    if (::waitpid(pid_, &status, WNOHANG) == pid_) {
+      pid_ = -1;
+      break;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  error = "nginx did not start: " + ReadFile((dir_ / "logs" / "error.log").string());
+  return false;
+}
+
+}  // namespace motionlod::server::testing
