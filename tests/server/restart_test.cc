@@ -97,5 +97,44 @@ TEST(DaemonRestart, SigtermLeavesUnfinishedJobsQueuedForTheNextStart) {
     EXPECT_EQ(WaitForJob(*client, id).value("state", ""), "succeeded");
 }
 
+TEST(DaemonRestart, ABakeRunningAtEachOfMaxJobCrashesDeathsIsFailedAndTheDaemonServes) {
+  // The daemon dies (SIGKILL, as the kernel's OOM killer would) while the same bake runs,
+  // twice: with max_job_crashes 2 the next start fails it as 'crashed' instead of running
+  // it a third time, and serves.
+  Daemon daemon(TestDirectory());
+  const std::vector<std::string> args = {"--threads", "1", "--max-job-crashes", "2"};
+  ASSERT_TRUE(daemon.Start(args)) << daemon.error;
+  auto client = daemon.Client();
+  ASSERT_EQ(UploadFile(*client, Sample(), "rig.glb")->status, 201);
+  auto submitted = SubmitBake(
+      *client,
+      {{"character", kSampleId}, {"motion", "Jump_Full_Long"}, {"all_levels", true}, {"fps", 800}});
+  ASSERT_TRUE(submitted);
+  ASSERT_EQ(submitted->status, 202) << submitted->body;
+  const std::string id = Json(submitted)["id"];
+  for (int death = 1; death <= 2; ++death) {
+    json status;
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    while (std::chrono::steady_clock::now() < deadline) {
+      status = Json(client->Get(("/v1/jobs/" + id).c_str()));
+      if (status.value("state", "") == "running") break;
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    ASSERT_EQ(status.value("state", ""), "running") << status.dump();
+    ASSERT_EQ(status.value("attempts", 0), death);
+    EXPECT_EQ(daemon.Stop(SIGKILL), 128 + SIGKILL);
+    ASSERT_TRUE(daemon.Start(args)) << daemon.error;
+    client = daemon.Client();
+  }
+  const json failed = Json(client->Get(("/v1/jobs/" + id).c_str()));
+  EXPECT_EQ(failed.value("state", ""), "failed") << failed.dump();
+  EXPECT_EQ(failed["error"].value("code", ""), "crashed") << failed.dump();
+  EXPECT_NE(failed["error"].value("detail", "").find("2"), std::string::npos) << failed.dump();
+  EXPECT_EQ(client->Get("/readyz")->status, 200);
+  auto health = client->Get("/healthz");
+  ASSERT_TRUE(health);
+  EXPECT_EQ(health->status, 200);
+}
+
 }  // namespace
 }  // namespace motionlod::server::testing
