@@ -24,11 +24,14 @@ if [ "${MOTIONLOD_SANITIZE_TESTS:-1}" != 0 ]; then
     -DCMAKE_UNITY_BUILD=ON >/dev/null
   cmake --build build-asan -j "$jobs"
   # Left to the Release pass: the baseline-SIMD copies of the real-data tests, and the
-  # tests that bake real characters' default ladders, 20 to 30 times slower here (a
-  # minute and more each). Under the sanitizers the same code runs in the sample's ladder
-  # test, the daemon's bakes and the core's tests on built fixtures.
+  # tests that bake default ladders (by cost), 20 to 30 times slower here (0.5 to 3
+  # minutes each). Under the sanitizers the same code runs in the daemon's other bakes,
+  # the explicit-level CLI tests and the core's tests on built fixtures.
   sanitizer_skip='^simd_baseline\.RealData\.|^RealData\.TheDefaultLadder|^Cli\.BakesTheSampleWithTheDefaultLadder$'
   sanitizer_skip+='|^CostLevels\.RealCharacters|^LevelChoiceOnRealData\.|^GltfExportHttp\.ExportsEachLevelByCost'
+  sanitizer_skip+='|^CostLevels\.TheSamplesLadder|^DaemonFlow\.UploadBakeWatchAndFetchLevelsMatchTheEngineInProcess$'
+  sanitizer_skip+='|^DaemonFlow\.TheSeedPrintsAReadableHeightRangeForEveryLevel$|^Cli\.ExportsEachLevelByCost'
+  sanitizer_skip+='|^Cli\.BakesTheLevelsForTheHeightsAsked$'
   sanitizer_skip+='|^web_viewer_e2e$'  # minutes here; the server tests cover the daemon's routes
   ASAN_OPTIONS=halt_on_error=1:detect_leaks=1:abort_on_error=0 \
     LSAN_OPTIONS="suppressions=$PWD/scripts/lsan-suppressions.txt:print_suppressions=0" \
@@ -38,7 +41,7 @@ fi
 
 # A short fuzzing pass (docs/RELIABILITY.md): build-fuzz with clang, every committed
 # regression input replayed, then each libFuzzer target for MOTIONLOD_FUZZ_SECONDS
-# (default 10; 0 skips it).
-if [ "${MOTIONLOD_FUZZ_SECONDS:-10}" != 0 ]; then
-  bash scripts/fuzz.sh "${MOTIONLOD_FUZZ_SECONDS:-10}"
+# (default 5; 0 skips it).
+if [ "${MOTIONLOD_FUZZ_SECONDS:-5}" != 0 ]; then
+  bash scripts/fuzz.sh "${MOTIONLOD_FUZZ_SECONDS:-5}"
 fi
