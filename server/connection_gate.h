@@ -114,9 +114,18 @@ class ConnectionGate {
     bool idle;      // between requests, no byte of the next yet
     bool draining;  // refused: its answer is sent, what it still sends is read and dropped
   };
+  enum class Arrival { kReady, kWaiting, kClosed, kTooLarge };
+  // Reads what has arrived on a connection the caller holds alone (or under mutex_):
+  // kReady when a whole header block is buffered.
+  Arrival Receive(Connection& connection) const;
   void Park(std::unique_ptr<Connection> connection, bool idle);
   void PollLoop();
   void ServeLoop();
+  // The next connection whose request is ready; null once stopping.
+  std::unique_ptr<Connection> NextReady();
+  // Serves one request, then waits for the next on the same connection while no other
+  // needs a thread; returns the connection when its next request is ready, else null.
+  std::unique_ptr<Connection> ServeAndLinger(std::unique_ptr<Connection> connection);
   // With mutex_ held.
   void OnReadable(int fd);
   void Dispatch(std::unique_ptr<Connection> connection);
@@ -134,11 +143,13 @@ class ConnectionGate {
   const RefusalResponse refusal_;
   int epoll_fd_ = -1;
   int wake_fd_ = -1;  // eventfd: Stop() wakes the poll thread
+  int work_fd_ = -1;  // eventfd: a ready connection waits for a thread (lingerers yield)
 
   std::mutex mutex_;
   std::condition_variable ready_cv_;
   std::unordered_map<int, Waiting> waiting_;
   std::deque<std::unique_ptr<Connection>> ready_;
+  int idle_threads_ = 0;  // serve threads waiting on ready_cv_
   bool stopping_ = false;
 
   std::atomic<bool> stopping_flag_{false};
