@@ -32,6 +32,10 @@ if [ "${MOTIONLOD_SANITIZE_TESTS:-1}" != 0 ]; then
   sanitizer_skip+='|^CostLevels\.TheSamplesLadder|^DaemonFlow\.UploadBakeWatchAndFetchLevelsMatchTheEngineInProcess$'
   sanitizer_skip+='|^DaemonFlow\.TheSeedPrintsAReadableHeightRangeForEveryLevel$|^Cli\.ExportsEachLevelByCost'
   sanitizer_skip+='|^Cli\.BakesTheLevelsForTheHeightsAsked$'
+  # Their paths run here in lighter tests: every clip's levels (the clip tests), the glTF
+  # validator (the daemon's export test), a drain at SIGTERM (the crash test's last stop).
+  sanitizer_skip+='|^RealData\.CharacterWideLevelsServeEveryClip$|^Cli\.ExportsLevelsThatTheGltfValidatorAccepts$'
+  sanitizer_skip+='|^DaemonRestart\.SigtermLeavesUnfinishedJobsQueuedForTheNextStart$'
   sanitizer_skip+='|^web_viewer_e2e$'  # minutes here; the server tests cover the daemon's routes
   ASAN_OPTIONS=halt_on_error=1:detect_leaks=1:abort_on_error=0 \
     LSAN_OPTIONS="suppressions=$PWD/scripts/lsan-suppressions.txt:print_suppressions=0" \

@@ -4,8 +4,10 @@
 // seconds (or idle keep-alive connections) held every thread and the daemon stopped
 // answering. Here a waiting connection costs a file descriptor and its bytes so far,
 // bounded by a header deadline, a header size and a connection count; the threads serve
-// only requests that are ready. A connection goes back to the gate between keep-alive
-// requests. The gate knows sockets and HTTP framing, not the HTTP library: the server
+// only requests that are ready. After a response the thread waits for the same client's
+// next request while no other connection needs a thread (the requests per second of a
+// thread per connection); otherwise the connection goes back to the gate. The gate
+// knows sockets and HTTP framing, not the HTTP library: the server
 // reads requests through Connection::Read, which hands out the bytes read ahead first.
 #pragma once
 
