@@ -121,6 +121,9 @@ class ConnectionGate {
   // kReady when a whole header block is buffered.
   Arrival Receive(Connection& connection) const;
   void Park(std::unique_ptr<Connection> connection, bool idle);
+  // With mutex_ held: a ready connection to a thread, a closed one closed, one past
+  // max_header_bytes refused.
+  void Settle(std::unique_ptr<Connection> connection, Arrival arrival);
   void PollLoop();
   void ServeLoop();
   // The next connection whose request is ready; null once stopping.
