@@ -1,5 +1,6 @@
 #include "tests/server/nginx.h"
 
+#include <fcntl.h>
 #include <netinet/in.h>
 #include <signal.h>
 #include <sys/socket.h>
@@ -66,6 +67,7 @@ bool Nginx::Start(int daemon_port) {
   std::string site = ReadFile(SourcePath("deploy/nginx/motionlod.conf"));
   Replace(site, "listen 8080", "listen 127.0.0.1:" + std::to_string(port_));
   Replace(site, "server 127.0.0.1:8081", "server 127.0.0.1:" + std::to_string(daemon_port));
+  Replace(site, "/var/cache/nginx/motionlod", (dir_ / "cache").string());
   std::ofstream(dir_ / "motionlod.conf") << site;
   const std::string prefix = dir_.string() + "/";
   std::ofstream(dir_ / "nginx.conf")
@@ -78,8 +80,12 @@ bool Nginx::Start(int daemon_port) {
       << "fastcgi;\n  uwsgi_temp_path " << prefix << "uwsgi;\n  scgi_temp_path " << prefix
       << "scgi;\n  include " << prefix << "motionlod.conf;\n}\n";
   const std::string config = (dir_ / "nginx.conf").string();
+  // What nginx says before its error log is open (a configuration error) goes here.
+  const std::string stderr_path = (dir_ / "logs" / "stderr.log").string();
   const pid_t pid = ::fork();
   if (pid == 0) {
+    const int log = ::open(stderr_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    if (log >= 0) ::dup2(log, STDERR_FILENO);
     ::execl(kBinary, kBinary, "-p", prefix.c_str(), "-c", config.c_str(), "-g", "daemon off;",
             static_cast<char*>(nullptr));
     ::_exit(127);
@@ -96,7 +102,8 @@ bool Nginx::Start(int daemon_port) {
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
-  error = "nginx did not start: " + ReadFile((dir_ / "logs" / "error.log").string());
+  error = "nginx did not start: " + ReadFile(stderr_path) +
+          ReadFile((dir_ / "logs" / "error.log").string());
   return false;
 }
 

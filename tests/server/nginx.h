@@ -1,6 +1,7 @@
 // A real nginx in front of a test daemon: deploy/nginx/motionlod.conf, its listen address
-// and upstream replaced by loopback ports, under a main config of the test's own (pid,
-// logs and temporary files in the test's directory). The binary is Debian's
+// and upstream replaced by loopback ports and its cache directory by one of the test's,
+// under a main config of the test's own (pid, logs and temporary files in the test's
+// directory). The binary is Debian's
 // (nginx-light, installed by scripts/setup.sh).
 #pragma once
 
