@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Cached level fetches over loopback: motionlodd against nginx serving the same bytes as
-# a static file, in the same run, with the same load:
+# a static file, and against nginx in front of motionlodd with deploy/nginx/motionlod.conf
+# (its level cache), in the same run, with the same load:
 #   wrk -t2 -c64 -d10s --latency -s bench/http/report.lua URL
 # Installs what is missing (wrk, nginx-light, curl), builds motionlodd, bakes the sample
 # character, and writes bench/http/RESULTS.md. Options (environment):
@@ -95,6 +96,35 @@ pids+=($!)
 for _ in $(seq 50); do curl -sf -o /dev/null "http://127.0.0.1:$port$level" && break; sleep 0.1; done
 cmp -s <(curl -sf "http://127.0.0.1:$port$level") "$work/level.mlod" || { echo "bench: nginx serves other bytes"; exit 1; }
 
+# nginx in front of motionlodd with the deployment's site file (its addresses and cache
+# directory replaced), the level fetched once so that it is in nginx's cache.
+proxy_port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')
+mkdir -p "$work/proxy/cache"
+sed -e "s|listen 8080|listen 127.0.0.1:$proxy_port|" -e "s|server 127.0.0.1:8081|server ${base#http://}|" \
+  -e "s|/var/cache/nginx/motionlod|$work/proxy/cache|" deploy/nginx/motionlod.conf >"$work/proxy/site.conf"
+cat >"$work/proxy/nginx.conf" <<CONF
+$([ "$(id -u)" = 0 ] && echo 'user root;')
+worker_processes auto;
+daemon off;
+pid $work/proxy/nginx.pid;
+error_log $work/proxy/error.log warn;
+events { worker_connections 1024; }
+http {
+  access_log off;
+  client_body_temp_path $work/proxy/body;
+  proxy_temp_path $work/proxy/proxy;
+  fastcgi_temp_path $work/proxy/fastcgi;
+  uwsgi_temp_path $work/proxy/uwsgi;
+  scgi_temp_path $work/proxy/scgi;
+  include $work/proxy/site.conf;
+}
+CONF
+nginx -c "$work/proxy/nginx.conf" -p "$work/proxy" &
+pids+=($!)
+for _ in $(seq 50); do curl -sf -o /dev/null "http://127.0.0.1:$proxy_port$level" && break; sleep 0.1; done
+[ "$(curl -sf -o /dev/null -w '%header{x-cache-status}' "http://127.0.0.1:$proxy_port$level")" = HIT ] ||
+  { echo "bench: the proxy does not serve the level from its cache"; exit 1; }
+
 run() {  # URL -> the RESULT line
   wrk -t"$wrk_threads" -c"$connections" -d"$duration" --latency -s bench/http/report.lua "$1" | grep "^RESULT"
 }
@@ -105,11 +135,14 @@ curl -sf -o /dev/null "$base$level"  # warm: the level is in motionlodd's cache
 # both alike; the table gives every round and the median of each.
 ours=()
 theirs=()
+proxied=()
 for round in $(seq "$rounds"); do
   ours+=("$(run "$base$level")")
   theirs+=("$(run "http://127.0.0.1:$port$level")")
+  proxied+=("$(run "http://127.0.0.1:$proxy_port$level")")
   echo "round $round: motionlodd ${ours[-1]#RESULT }"
   echo "round $round: nginx      ${theirs[-1]#RESULT }"
+  echo "round $round: proxy      ${proxied[-1]#RESULT }"
 done
 median() {  # FIELD LINE... -> the median of that field
   local name=$1
@@ -124,6 +157,10 @@ theirs_rps=$(median rps "${theirs[@]}")
 ours_p99=$(median p99_ms "${ours[@]}")
 theirs_p99=$(median p99_ms "${theirs[@]}")
 ratio=$(python3 -c "print(f'{$ours_rps / $theirs_rps:.2f}')")
+proxied_rps=$(median rps "${proxied[@]}")
+proxied_p99=$(median p99_ms "${proxied[@]}")
+proxy_ratio=$(python3 -c "print(f'{$proxied_rps / $theirs_rps:.2f}')")
+proxy_gain=$(python3 -c "print(f'{$proxied_rps / $ours_rps:.2f}')")
 {
   cat <<MD
 # Cached level fetches: motionlodd and nginx
@@ -137,18 +174,22 @@ One level file of the sample character (px=120: ${bytes} bytes), fetched over lo
 \`wrk -t${wrk_threads} -c${connections} -d${duration} --latency -s bench/http/report.lua URL\`,
 ${rounds} rounds alternating the servers: motionlodd serving \`/v1/levels/{sha256}\` from its
 memory cache (access log: ${access_log}), nginx serving the same bytes as a static file
-(\`worker_processes auto\`, sendfile, no access log).
+(\`worker_processes auto\`, sendfile, no access log), and "proxy": nginx with
+\`deploy/nginx/motionlod.conf\` in front of motionlodd, the level in its cache.
 
 | server | round | requests/s | p50 ms | p90 ms | p99 ms | max ms | errors |
 |---|---:|---:|---:|---:|---:|---:|---:|
 MD
   for r in $(seq "$rounds"); do row motionlodd "$r" "${ours[$((r - 1))]}"; done
   for r in $(seq "$rounds"); do row nginx "$r" "${theirs[$((r - 1))]}"; done
+  for r in $(seq "$rounds"); do row proxy "$r" "${proxied[$((r - 1))]}"; done
   cat <<MD
 
 Medians: motionlodd ${ours_rps} requests/s (p99 ${ours_p99} ms), nginx ${theirs_rps} requests/s
 (p99 ${theirs_p99} ms): motionlodd reaches **${ratio}** of nginx's throughput (target: at
-least 0.5, with p99 under 20 ms).
+least 0.5, with p99 under 20 ms). Through the proxy ${proxied_rps} requests/s (p99
+${proxied_p99} ms): **${proxy_ratio}** of static nginx (target: at least 0.9), ${proxy_gain}x
+motionlodd alone.
 
 The ratio depends on the machine's load: with more runnable threads than cores, the
 kernel shares CPU time per thread, and motionlodd's 64 busy connection threads then get
