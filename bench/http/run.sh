@@ -58,69 +58,60 @@ level=$(curl -sf -H 'Accept: application/json' "$base/v1/bakes/$job/level?px=120
 curl -sf -o "$work/level.mlod" "$base$level"
 bytes=$(stat -c %s "$work/level.mlod")
 
-# nginx serving the same bytes on a free port, its config generated here.
-port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')
-mkdir -p "$work/www/v1/levels" "$work/nginx"
-cp "$work/level.mlod" "$work/www$level"
-# nginx's workers drop root for nobody: let them read the file.
-chmod 755 "$work"
-chmod -R a+rX "$work/www"
-cat >"$work/nginx/nginx.conf" <<CONF
+# Starts nginx in DIR (its pid, logs and temporary files there) with these http-level
+# lines after the common ones.
+start_nginx() {  # DIR HTTP_LINES
+  mkdir -p "$1"
+  cat >"$1/nginx.conf" <<CONF
 worker_processes auto;
 daemon off;
-pid $work/nginx/nginx.pid;
-error_log $work/nginx/error.log warn;
+pid $1/nginx.pid;
+error_log $1/error.log warn;
 events { worker_connections 1024; }
 http {
   access_log off;
-  sendfile on;
+  client_body_temp_path $1/body;
+  proxy_temp_path $1/proxy;
+  fastcgi_temp_path $1/fastcgi;
+  uwsgi_temp_path $1/uwsgi;
+  scgi_temp_path $1/scgi;
+$2
+}
+CONF
+  nginx -c "$1/nginx.conf" -p "$1" &
+  pids+=($!)
+}
+free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])'; }
+
+# nginx serving the same bytes on a free port.
+port=$(free_port)
+mkdir -p "$work/www/v1/levels"
+cp "$work/level.mlod" "$work/www$level"
+# nginx's workers drop root for nobody: let them read the file and write the cache.
+chmod 755 "$work"
+chmod -R a+rX "$work/www"
+start_nginx "$work/nginx" "  sendfile on;
   tcp_nopush on;
   tcp_nodelay on;
   keepalive_requests 10000;
-  client_body_temp_path $work/nginx/body;
-  proxy_temp_path $work/nginx/proxy;
-  fastcgi_temp_path $work/nginx/fastcgi;
-  uwsgi_temp_path $work/nginx/uwsgi;
-  scgi_temp_path $work/nginx/scgi;
   types { application/octet-stream mlod; }
   default_type application/octet-stream;
   server {
     listen 127.0.0.1:$port;
     root $work/www;
-    location /v1/levels/ { add_header Cache-Control "public, max-age=31536000, immutable"; etag on; }
-  }
-}
-CONF
-nginx -c "$work/nginx/nginx.conf" -p "$work/nginx" &
-pids+=($!)
+    location /v1/levels/ { add_header Cache-Control \"public, max-age=31536000, immutable\"; etag on; }
+  }"
 for _ in $(seq 50); do curl -sf -o /dev/null "http://127.0.0.1:$port$level" && break; sleep 0.1; done
 cmp -s <(curl -sf "http://127.0.0.1:$port$level") "$work/level.mlod" || { echo "bench: nginx serves other bytes"; exit 1; }
 
 # nginx in front of motionlodd with the deployment's site file (its addresses and cache
 # directory replaced), the level fetched once so that it is in nginx's cache.
-proxy_port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')
+proxy_port=$(free_port)
 mkdir -p "$work/proxy/cache"
+chmod 777 "$work/proxy/cache"
 sed -e "s|listen 8080|listen 127.0.0.1:$proxy_port|" -e "s|server 127.0.0.1:8081|server ${base#http://}|" \
   -e "s|/var/cache/nginx/motionlod|$work/proxy/cache|" deploy/nginx/motionlod.conf >"$work/proxy/site.conf"
-cat >"$work/proxy/nginx.conf" <<CONF
-$([ "$(id -u)" = 0 ] && echo 'user root;')
-worker_processes auto;
-daemon off;
-pid $work/proxy/nginx.pid;
-error_log $work/proxy/error.log warn;
-events { worker_connections 1024; }
-http {
-  access_log off;
-  client_body_temp_path $work/proxy/body;
-  proxy_temp_path $work/proxy/proxy;
-  fastcgi_temp_path $work/proxy/fastcgi;
-  uwsgi_temp_path $work/proxy/uwsgi;
-  scgi_temp_path $work/proxy/scgi;
-  include $work/proxy/site.conf;
-}
-CONF
-nginx -c "$work/proxy/nginx.conf" -p "$work/proxy" &
-pids+=($!)
+start_nginx "$work/proxy" "  include $work/proxy/site.conf;"
 for _ in $(seq 50); do curl -sf -o /dev/null "http://127.0.0.1:$proxy_port$level" && break; sleep 0.1; done
 [ "$(curl -sf -o /dev/null -w '%header{x-cache-status}' "http://127.0.0.1:$proxy_port$level")" = HIT ] ||
   { echo "bench: the proxy does not serve the level from its cache"; exit 1; }
