@@ -231,15 +231,8 @@ Result<Created<api::JobStatus>> Bakes::Submit(const api::BakeRequest& request) {
     // A bake that failed to store its result runs again when asked again.
     if (existing->has_value() && (*existing)->state == "failed" &&
         (*existing)->error_code == "storage") {
-      JobRecord retry = **existing;
-      retry.state = "queued";
-      retry.error_code.clear();
-      retry.error_detail.clear();
-      retry.progress = 0;
-      retry.stage.clear();
-      retry.created_ms = now;
-      retry.started_ms = 0;
-      retry.finished_ms = 0;
+      JobRecord retry = job;  // queued now, its runs so far counted
+      retry.attempts = (*existing)->attempts;
       auto updated = context_.store->UpdateJob(retry);
       if (!updated.ok()) return Internal(updated.status());
       if (auto queued = jobs_.Enqueue(retry); !queued.ok()) {

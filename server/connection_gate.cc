@@ -45,6 +45,13 @@ bool StartsWithNoCase(std::string_view text, std::string_view prefix) {
   return true;
 }
 
+// `seconds` from now.
+std::chrono::steady_clock::time_point After(double seconds) {
+  return std::chrono::steady_clock::now() +
+         std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+             std::chrono::duration<double>(seconds));
+}
+
 int PollOne(int fd, short events, int timeout_ms, short& revents) {
   pollfd entry{fd, events, 0};
   int ready;
@@ -111,6 +118,7 @@ ssize_t Connection::Read(char* data, size_t size, int timeout_ms) {
   const size_t count = std::min(size, buffer_.size() - begin_);
   std::memcpy(data, buffer_.data() + begin_, count);
   begin_ += count;
+  scanned_ = 0;  // the next header search starts at the new first byte
   return static_cast<ssize_t>(count);
 }
 
@@ -216,9 +224,11 @@ void ConnectionGate::Admit(int fd) {
 }
 
 ConnectionGate::Arrival ConnectionGate::Receive(Connection& connection) const {
-  connection.scanned_ = 0;
   const bool open = connection.ReadAvailable(limits_.max_header_bytes);
-  if (connection.HeaderLength() > 0) return Arrival::kReady;
+  if (const size_t header = connection.HeaderLength(); header > 0) {
+    connection.DropIgnorableHeaders(header);
+    return Arrival::kReady;
+  }
   if (!open) return Arrival::kClosed;
   if (connection.buffer_.size() >= limits_.max_header_bytes) return Arrival::kTooLarge;
   return Arrival::kWaiting;
@@ -232,9 +242,7 @@ void ConnectionGate::Park(std::unique_ptr<Connection> connection, bool idle) {
   if (arrival != Arrival::kWaiting) return Settle(std::move(connection), arrival);
   idle = idle && !connection->HasBufferedBytes();
   Watch(std::move(connection),
-        std::chrono::duration<double>(idle ? limits_.keep_alive_timeout_seconds
-                                           : limits_.header_timeout_seconds),
-        idle, false);
+        idle ? limits_.keep_alive_timeout_seconds : limits_.header_timeout_seconds, idle, false);
 }
 
 void ConnectionGate::Settle(std::unique_ptr<Connection> connection, Arrival arrival) {
@@ -249,16 +257,22 @@ void ConnectionGate::Settle(std::unique_ptr<Connection> connection, Arrival arri
   }
 }
 
-void ConnectionGate::Watch(std::unique_ptr<Connection> connection,
-                           std::chrono::duration<double> wait, bool idle, bool draining) {
+void ConnectionGate::Watch(std::unique_ptr<Connection> connection, double seconds, bool idle,
+                           bool draining) {
   const int fd = connection->fd();
   epoll_event event{};
   event.events = EPOLLIN | EPOLLRDHUP;
   event.data.fd = fd;
   ::epoll_ctl(epoll_fd_, EPOLL_CTL_ADD, fd, &event);
-  waiting_[fd] =
-      Waiting{std::move(connection),
-              Clock::now() + std::chrono::duration_cast<Clock::duration>(wait), idle, draining};
+  waiting_[fd] = Waiting{std::move(connection), After(seconds), idle, draining};
+}
+
+std::unique_ptr<Connection> ConnectionGate::Unwatch(
+    std::unordered_map<int, Waiting>::iterator waiting) {
+  ::epoll_ctl(epoll_fd_, EPOLL_CTL_DEL, waiting->first, nullptr);
+  std::unique_ptr<Connection> connection = std::move(waiting->second.connection);
+  waiting_.erase(waiting);
+  return connection;
 }
 
 void ConnectionGate::OnReadable(int fd) {
@@ -274,32 +288,19 @@ void ConnectionGate::OnReadable(int fd) {
       connection.dropped_ += static_cast<size_t>(got);
     }
     const bool open = got > 0 || (got < 0 && (errno == EAGAIN || errno == EINTR));
-    if (!open || connection.dropped_ > kLingerBytes) {
-      ::epoll_ctl(epoll_fd_, EPOLL_CTL_DEL, fd, nullptr);
-      std::unique_ptr<Connection> taken = std::move(waiting.connection);
-      waiting_.erase(found);
-      Close(std::move(taken));
-    }
+    if (!open || connection.dropped_ > kLingerBytes) Close(Unwatch(found));
     return;
   }
   const Arrival arrival = Receive(connection);
-  if (arrival != Arrival::kWaiting) {
-    ::epoll_ctl(epoll_fd_, EPOLL_CTL_DEL, fd, nullptr);
-    std::unique_ptr<Connection> taken = std::move(waiting.connection);
-    waiting_.erase(found);
-    return Settle(std::move(taken), arrival);
-  }
+  if (arrival != Arrival::kWaiting) return Settle(Unwatch(found), arrival);
   if (waiting.idle && connection.HasBufferedBytes()) {
     // The next request has begun: it now has the header deadline.
     waiting.idle = false;
-    waiting.deadline =
-        Clock::now() + std::chrono::duration_cast<Clock::duration>(
-                           std::chrono::duration<double>(limits_.header_timeout_seconds));
+    waiting.deadline = After(limits_.header_timeout_seconds);
   }
 }
 
 void ConnectionGate::Dispatch(std::unique_ptr<Connection> connection) {
-  connection->DropIgnorableHeaders(connection->HeaderLength());
   ready_.push_back(std::move(connection));
   if (idle_threads_ > 0) {
     ready_cv_.notify_one();
@@ -325,7 +326,7 @@ void ConnectionGate::Refuse(std::unique_ptr<Connection> connection, ConnectionRe
   // Past max_connections nothing more is held for it.
   if (why == ConnectionRefusal::kTooManyConnections) return Close(std::move(connection));
   ::shutdown(connection->fd(), SHUT_WR);
-  Watch(std::move(connection), std::chrono::duration<double>(kLingerSeconds), false, true);
+  Watch(std::move(connection), kLingerSeconds, false, true);
 }
 
 void ConnectionGate::PollLoop() {
@@ -346,11 +347,10 @@ void ConnectionGate::PollLoop() {
     }
     for (const int fd : expired) {
       const auto found = waiting_.find(fd);
-      ::epoll_ctl(epoll_fd_, EPOLL_CTL_DEL, fd, nullptr);
-      std::unique_ptr<Connection> taken = std::move(found->second.connection);
-      const bool idle = found->second.idle || found->second.draining;
-      waiting_.erase(found);
-      if (idle) {
+      // A request begun and not finished gets its 408; an idle or refused one just closes.
+      const bool quiet = found->second.idle || found->second.draining;
+      std::unique_ptr<Connection> taken = Unwatch(found);
+      if (quiet) {
         Close(std::move(taken));
       } else {
         Refuse(std::move(taken), ConnectionRefusal::kHeaderTimeout);
@@ -389,9 +389,7 @@ std::unique_ptr<Connection> ConnectionGate::ServeAndLinger(std::unique_ptr<Conne
   // next request (as a thread per connection would): a client streaming requests skips
   // the poll thread and a handoff, which cost 15% to 25% of the requests per second of
   // 64 kept connections. Work queued for a thread (work_fd_) sends it to the gate.
-  const auto deadline =
-      Clock::now() + std::chrono::duration_cast<Clock::duration>(
-                         std::chrono::duration<double>(limits_.keep_alive_timeout_seconds));
+  const Clock::time_point deadline = After(limits_.keep_alive_timeout_seconds);
   for (;;) {
     const auto left =
         std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now());
@@ -407,10 +405,7 @@ std::unique_ptr<Connection> ConnectionGate::ServeAndLinger(std::unique_ptr<Conne
     if (stopping()) continue;
     if (waits[0].revents != 0) {
       const Arrival arrival = Receive(*connection);
-      if (arrival == Arrival::kReady) {
-        connection->DropIgnorableHeaders(connection->HeaderLength());
-        return connection;
-      }
+      if (arrival == Arrival::kReady) return connection;
       if (arrival == Arrival::kClosed) {
         Close(std::move(connection));
         return nullptr;

@@ -118,7 +118,7 @@ class ConnectionGate {
   };
   enum class Arrival { kReady, kWaiting, kClosed, kTooLarge };
   // Reads what has arrived on a connection the caller holds alone (or under mutex_):
-  // kReady when a whole header block is buffered.
+  // kReady when a whole header block is buffered (its ignorable headers then dropped).
   Arrival Receive(Connection& connection) const;
   void Park(std::unique_ptr<Connection> connection, bool idle);
   // With mutex_ held: a ready connection to a thread, a closed one closed, one past
@@ -139,8 +139,10 @@ class ConnectionGate {
   // nginx's lingering close), so that closing with its bytes unread does not reset the
   // connection before the answer is read.
   void Refuse(std::unique_ptr<Connection> connection, ConnectionRefusal why);
-  void Watch(std::unique_ptr<Connection> connection, std::chrono::duration<double> wait, bool idle,
-             bool draining);
+  // With mutex_ held: waits `seconds` at most for the connection to be readable.
+  void Watch(std::unique_ptr<Connection> connection, double seconds, bool idle, bool draining);
+  // With mutex_ held: takes a connection off the wait list and epoll.
+  std::unique_ptr<Connection> Unwatch(std::unordered_map<int, Waiting>::iterator waiting);
 
   const GateLimits limits_;
   ConnectionCounters& counters_;

@@ -22,10 +22,10 @@ Status Jobs::Start() {
                   context_.config.max_job_crashes);
     ++context_.bake_metrics.failed;
   }
-  const std::vector<std::string>* unfinished = &taken->requeued;
+  const std::vector<std::string>& unfinished = taken->requeued;
   {
     std::lock_guard lock(board_mutex_);
-    for (const std::string& id : *unfinished) {
+    for (const std::string& id : unfinished) {
       auto job = context_.store->GetJob(id);
       if (!job.ok()) return job.status();
       if (!job->has_value()) continue;
@@ -56,8 +56,8 @@ Status Jobs::Start() {
           ++context_.bake_metrics.failed;
         }
       });
-  for (const std::string& id : *unfinished) queue_->Push(id, /*force=*/true);
-  if (!unfinished->empty()) spdlog::info("requeued {} unfinished jobs", unfinished->size());
+  for (const std::string& id : unfinished) queue_->Push(id, /*force=*/true);
+  if (!unfinished.empty()) spdlog::info("requeued {} unfinished jobs", unfinished.size());
   spdlog::info("{} bake workers, {} threads per bake, queue capacity {}", workers,
                config.bake_threads == 0 ? pipeline::ResolveThreads(0) : config.bake_threads,
                config.queue_capacity);
