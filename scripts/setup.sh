@@ -14,6 +14,7 @@ packages=(
   bubblewrap libseccomp-dev  # the import worker's sandbox and its seccomp filter (server/import_sandbox.h)
   clang libclang-rt-14-dev  # libFuzzer targets (scripts/fuzz.sh)
   nginx-light  # the reverse proxy of deploy/nginx/, run by the slow-client test
+  libhiredis-dev redis-server  # the Redis backend (server/redis_*.h) and its tests
 )
 # The web viewer builds with Node.js (18 or later): Debian's, unless one is installed.
 command -v node >/dev/null || packages+=(nodejs npm)

@@ -1,53 +1,47 @@
-// A content-addressed directory of immutable files: <root>/sha256/ab/cdef... holds the
-// bytes whose SHA-256 is abcdef.... Writes are atomic (a temporary file in the same
-// directory, fsync, rename, fsync of the directory), so a reader never sees a partial
-// file and a crash leaves either nothing or the whole blob. Reads check the hash: a
-// corrupted blob reads as kDataLoss, never as wrong bytes. Paths are only ever built
-// from validated ids (^[0-9a-f]{64}$), never from user text. Thread-safe.
+// Immutable bytes named by their SHA-256 (uploads, level sets, single levels). Two
+// implementations: DirectoryBlobStore (server/directory_blob_store.h: a local or shared
+// directory, the default) and RedisBlobStore (server/redis_store.h: blobs up to a size
+// cap in Redis). Reads check the hash: a corrupted blob reads as kDataLoss, never as
+// wrong bytes. Every method is thread-safe.
 #pragma once
 
-#include <filesystem>
-#include <memory>
+#include <cstdint>
 #include <string>
 #include <string_view>
 #include <vector>
 
 #include "base/status.h"
+#include "io/sha256.h"
 
 namespace motionlod::server {
 
 class BlobStore {
  public:
-  // Creates <root>/sha256 when missing and removes temporary files a crash left behind.
-  static StatusOr<std::unique_ptr<BlobStore>> Open(const std::filesystem::path& root);
+  virtual ~BlobStore() = default;
 
   // Stores `bytes` and returns their SHA-256 hex. Idempotent: storing present bytes again
   // is a no-op.
-  StatusOr<std::string> Put(std::string_view bytes);
-  // The same when the caller already knows the hash (checked in debug builds).
-  Status PutWithHash(std::string_view hash, std::string_view bytes);
+  StatusOr<std::string> Put(std::string_view bytes) {
+    std::string hash = io::Sha256Hex(bytes);
+    if (Status status = PutWithHash(hash, bytes); !status.ok()) return status;
+    return hash;
+  }
+  // The same when the caller already knows the hash (which must be that of `bytes`).
+  virtual Status PutWithHash(std::string_view hash, std::string_view bytes) = 0;
 
   // kNotFound when absent, kDataLoss when the bytes no longer match their hash,
   // kInvalidArgument for a malformed id.
-  StatusOr<std::string> Get(std::string_view hash) const;
-  bool Contains(std::string_view hash) const;
+  virtual StatusOr<std::string> Get(std::string_view hash) const = 0;
+  virtual bool Contains(std::string_view hash) const = 0;
   // Removes the blob (absent is fine).
-  Status Remove(std::string_view hash);
+  virtual Status Remove(std::string_view hash) = 0;
 
-  // Unavailable (naming no path) when a file cannot be created under the root now, or
-  // the file system has less than `min_free_bytes` free: what /readyz reports.
-  Status CheckWritable(int64_t min_free_bytes) const;
+  // Unavailable (naming no path) when a blob cannot be written now, or fewer than
+  // `min_free_bytes` are free: what /readyz reports.
+  virtual Status CheckWritable(int64_t min_free_bytes) const = 0;
 
   // Every stored hash (for garbage collection at start).
-  std::vector<std::string> List() const;
-
-  const std::filesystem::path& root() const { return root_; }
-
- private:
-  explicit BlobStore(std::filesystem::path root) : root_(std::move(root)) {}
-  std::filesystem::path PathOf(std::string_view hash) const;
-
-  std::filesystem::path root_;  // <data>/blobs
+  virtual std::vector<std::string> List() const = 0;
 };
 
 }  // namespace motionlod::server

@@ -11,6 +11,8 @@
 #include <sstream>
 #include <variant>
 
+#include "server/redis_client.h"
+
 namespace motionlod::server {
 namespace {
 
@@ -36,6 +38,17 @@ const std::vector<OptionSpec>& Specs() {
       {"storage", "data_dir", &Config::data_dir, "database and content-addressed blobs"},
       {"storage", "min_free_bytes", &Config::min_free_bytes,
        "free space below which /readyz is 503"},
+      {"storage", "backend", &Config::backend, "embedded (SQLite, one daemon) or redis (shared)"},
+      {"storage", "redis_url", &Config::redis_url, "redis://[:password@]host[:port][/db]"},
+      {"storage", "redis_prefix", &Config::redis_prefix, "prefix of every Redis key"},
+      {"storage", "blob_store", &Config::blob_store, "blobs in a directory or in redis"},
+      {"storage", "blob_dir", &Config::blob_dir, "blob directory (default: <data_dir>/blobs)"},
+      {"storage", "redis_max_blob_bytes", &Config::redis_max_blob_bytes,
+       "largest blob kept in Redis"},
+      {"storage", "redis_timeout_seconds", &Config::redis_timeout_seconds,
+       "Redis connect and reply timeout"},
+      {"jobs", "job_visibility_seconds", &Config::job_visibility_seconds,
+       "redis backend: silence after which another daemon takes a job"},
       {"jobs", "threads", &Config::threads, "bake workers (0: one per hardware thread)"},
       {"jobs", "bake_threads", &Config::bake_threads,
        "threads inside one bake (0: one per hardware thread)"},
@@ -219,6 +232,22 @@ Status Config::Validate() const {
     return InvalidArgument("max_connections must be in [http_threads, 1048576]");
   if (data_dir.empty()) return InvalidArgument("data_dir must not be empty");
   if (min_free_bytes < 0) return InvalidArgument("min_free_bytes must be >= 0");
+  if (backend != "embedded" && backend != "redis")
+    return InvalidArgument("backend must be \"embedded\" or \"redis\"");
+  if (blob_store != "directory" && blob_store != "redis")
+    return InvalidArgument("blob_store must be \"directory\" or \"redis\"");
+  if (backend == "redis") {
+    if (Status status = ParseRedisUrl(redis_url).status(); !status.ok()) return status;
+    if (redis_prefix.empty()) return InvalidArgument("redis_prefix must not be empty");
+  } else if (blob_store == "redis") {
+    return InvalidArgument("blob_store = \"redis\" needs backend = \"redis\"");
+  }
+  if (blob_store == "redis" && redis_max_blob_bytes < max_upload_bytes)
+    return InvalidArgument("redis_max_blob_bytes must be at least max_upload_bytes");
+  if (!(redis_timeout_seconds > 0 && redis_timeout_seconds <= 60))
+    return InvalidArgument("redis_timeout_seconds must be in (0, 60]");
+  if (!(job_visibility_seconds >= 1 && job_visibility_seconds <= 86400))
+    return InvalidArgument("job_visibility_seconds must be in [1, 86400]");
   if (threads < 0 || threads > 256) return InvalidArgument("threads must be in [0, 256]");
   if (bake_threads < 0 || bake_threads > 256)
     return InvalidArgument("bake_threads must be in [0, 256]");

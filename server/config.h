@@ -29,6 +29,19 @@ struct Config {
   // Storage.
   std::string data_dir = "motionlodd-data";
   int64_t min_free_bytes = int64_t{64} << 20;  // free space below which /readyz says not ready
+  // "embedded": SQLite in data_dir and a queue in memory (one daemon). "redis": metadata
+  // and the job queue in Redis, shared by every daemon on it (server/redis_store.h).
+  std::string backend = "embedded";
+  std::string redis_url = "redis://127.0.0.1:6379";
+  std::string redis_prefix = "motionlod:";  // every key's prefix (several deployments, one Redis)
+  // Where blobs live: "directory" (blob_dir; shared by the daemons of a redis backend) or
+  // "redis" (in Redis, each at most redis_max_blob_bytes).
+  std::string blob_store = "directory";
+  std::string blob_dir;  // "": <data_dir>/blobs
+  int64_t redis_max_blob_bytes = int64_t{64} << 20;
+  double redis_timeout_seconds = 5;  // connect and reply
+  // A job whose daemon stopped answering for this long is run by another (redis backend).
+  double job_visibility_seconds = 60;
 
   // Jobs.
   int threads = 0;            // bake workers draining the queue; 0: one per hardware thread

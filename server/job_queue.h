@@ -1,57 +1,41 @@
-// A bounded FIFO of job ids drained by a fixed pool of worker threads. The queue knows
-// nothing of bakes: a worker calls `run(id)` and takes the next id when it returns.
-// Thread-safe.
+// The queue of bake jobs: ids pushed by the HTTP side, taken by a fixed pool of worker
+// threads that call `run(id)` and take the next id when it returns. The queue knows
+// nothing of bakes. Two implementations: MemoryJobQueue (server/memory_job_queue.h, one
+// daemon; the store keeps the queued jobs across restarts) and RedisJobQueue
+// (server/redis_job_queue.h: a Redis Stream that several daemons take from, at least
+// once). Thread-safe.
 #pragma once
 
-#include <condition_variable>
 #include <cstddef>
-#include <deque>
 #include <functional>
-#include <mutex>
-#include <set>
 #include <string>
-#include <thread>
-#include <vector>
 
 namespace motionlod::server {
 
 class JobQueue {
  public:
-  using Runner = std::function<void(const std::string& id)>;
+  // kInterrupted: the job stopped before its end (shutdown) and must run again.
+  enum class RunOutcome { kFinished, kInterrupted };
+  using Runner = std::function<RunOutcome(const std::string& id)>;
 
-  // `capacity` bounds the ids waiting (not those running); `workers` >= 1.
-  JobQueue(size_t capacity, int workers, Runner run);
-  ~JobQueue();  // Stop()
-  JobQueue(const JobQueue&) = delete;
-  JobQueue& operator=(const JobQueue&) = delete;
+  virtual ~JobQueue() = default;
 
-  enum class PushResult { kQueued, kAlreadyQueued, kFull, kStopped };
+  // kUnavailable: the queue's backend does not answer now (the caller answers 503).
+  enum class PushResult { kQueued, kAlreadyQueued, kFull, kStopped, kUnavailable };
   // `force` ignores the capacity (jobs accepted before a restart are never refused).
-  PushResult Push(const std::string& id, bool force = false);
-  // Drops a waiting id (its job was deleted); false when it is not waiting.
-  bool Remove(const std::string& id);
+  virtual PushResult Push(const std::string& id, bool force) = 0;
+  PushResult Push(const std::string& id) { return Push(id, false); }
+  // Drops a waiting id (its job was deleted); false when it is not waiting here.
+  virtual bool Remove(const std::string& id) = 0;
 
-  size_t depth() const;  // waiting
-  size_t running() const;
-  size_t capacity() const { return capacity_; }
+  virtual size_t depth() const = 0;    // waiting
+  virtual size_t running() const = 0;  // running in this process
+  virtual size_t capacity() const = 0;
 
   // Workers take no new id from now on (the ids still waiting stay waiting).
-  void StopTaking();
+  virtual void StopTaking() = 0;
   // StopTaking, then joins the workers (each finishes the job it runs).
-  void Stop();
-
- private:
-  void Work();
-
-  const size_t capacity_;
-  const Runner run_;
-  mutable std::mutex mutex_;
-  std::condition_variable ready_;
-  std::deque<std::string> waiting_;
-  std::set<std::string> waiting_ids_;
-  size_t running_ = 0;
-  bool stopping_ = false;
-  std::vector<std::thread> workers_;
+  virtual void Stop() = 0;
 };
 
 }  // namespace motionlod::server

@@ -14,6 +14,14 @@ namespace motionlod::server {
 
 namespace api = proto::api;
 
+namespace {
+
+// How often a wait on a job that runs on another daemon (or is not running) reads the
+// store.
+constexpr auto kStorePollInterval = std::chrono::milliseconds(100);
+
+}  // namespace
+
 Status Jobs::Start() {
   auto taken = context_.store->TakeUnfinishedJobs(context_.config.max_job_crashes, NowMs());
   if (!taken.ok()) return taken.status();
@@ -37,10 +45,13 @@ Status Jobs::Start() {
   }
   const Config& config = context_.config;
   const int workers = config.threads > 0 ? config.threads : pipeline::ResolveThreads(0);
-  queue_ = std::make_unique<JobQueue>(
-      static_cast<size_t>(config.queue_capacity), workers, [this](const std::string& id) {
+  auto queue = context_.make_queue(
+      static_cast<size_t>(config.queue_capacity), workers,
+      [this](const std::string& id) -> JobQueue::RunOutcome {
+        bool interrupted = false;
         try {
-          Run(id);
+          Run(id, interrupted);
+          return interrupted ? JobQueue::RunOutcome::kInterrupted : JobQueue::RunOutcome::kFinished;
         } catch (const std::exception& error) {  // out of memory on a huge bake, ...
           spdlog::error("bake {} threw: {}", id, error.what());
           auto job = context_.store->GetJob(id);
@@ -54,8 +65,11 @@ Status Jobs::Start() {
             Publish(record, /*erase=*/true);
           }
           ++context_.bake_metrics.failed;
+          return JobQueue::RunOutcome::kFinished;
         }
       });
+  if (!queue.ok()) return queue.status();
+  queue_ = std::move(*queue);
   for (const std::string& id : unfinished) queue_->Push(id, /*force=*/true);
   if (!unfinished.empty()) spdlog::info("requeued {} unfinished jobs", unfinished.size());
   spdlog::info("{} bake workers, {} threads per bake, queue capacity {}", workers,
@@ -93,7 +107,8 @@ void Jobs::Shutdown() {
 }
 
 Result<Done> Jobs::Enqueue(const JobRecord& job) {
-  {
+  const bool shared = context_.store->shared();
+  if (!shared) {
     std::lock_guard lock(board_mutex_);
     LiveJob live;
     live.record = job;
@@ -102,20 +117,23 @@ Result<Done> Jobs::Enqueue(const JobRecord& job) {
   }
   const JobQueue::PushResult pushed =
       queue_ ? queue_->Push(job.id) : JobQueue::PushResult::kStopped;
-  if (pushed == JobQueue::PushResult::kFull || pushed == JobQueue::PushResult::kStopped) {
-    {
-      std::lock_guard lock(board_mutex_);
-      board_.erase(job.id);
-    }
-    if (pushed == JobQueue::PushResult::kStopped) {
-      return Error(ErrorKind::kUnavailable, "the daemon is shutting down", 5);
-    }
-    return Error(
-        ErrorKind::kUnavailable,
-        "the bake queue is full (" + std::to_string(queue_->capacity()) + " waiting); retry later",
-        5);
+  if (pushed == JobQueue::PushResult::kQueued || pushed == JobQueue::PushResult::kAlreadyQueued)
+    return Done{};
+  if (!shared) {
+    std::lock_guard lock(board_mutex_);
+    board_.erase(job.id);
   }
-  return Done{};
+  switch (pushed) {
+    case JobQueue::PushResult::kStopped:
+      return Error(ErrorKind::kUnavailable, "the daemon is shutting down", 5);
+    case JobQueue::PushResult::kUnavailable:
+      return Error(ErrorKind::kUnavailable, kStorageFaultDetail, 5);
+    default:
+      return Error(ErrorKind::kUnavailable,
+                   "the bake queue is full (" + std::to_string(queue_->capacity()) +
+                       " waiting); retry later",
+                   5);
+  }
 }
 
 void Jobs::Cancel(const std::string& id) {
@@ -139,7 +157,7 @@ void Jobs::Publish(const JobRecord& record, bool erase) {
       auto found = board_.find(record.id);
       if (found == board_.end()) return;  // deleted meanwhile
       found->second.record = record;
-      found->second.version = next_version_++;
+      found->second.version = context_.store->shared() ? record.version : next_version_++;
     }
   }
   board_changed_.notify_all();
@@ -164,7 +182,7 @@ api::JobStatus Jobs::ToStatus(const JobRecord& r, uint64_t version) const {
 Result<api::JobStatus> Jobs::FromStore(const std::string& id) {
   auto job = FindRecord(*context_.store, &Store::GetJob, "job", id);
   if (!job.ok()) return job.error();
-  return ToStatus(*job, 0);
+  return ToStatus(*job, job->version);
 }
 
 Result<api::JobStatus> Jobs::Get(const std::string& id) {
@@ -188,7 +206,7 @@ Result<api::JobStatus> Jobs::Wait(const std::string& id, uint64_t after_version,
     const auto found = board_.find(id);
     if (found == board_.end()) {
       lock.unlock();
-      return FromStore(id);
+      return WaitInStore(id, after_version, deadline);
     }
     if (found->second.version > after_version || draining_ ||
         std::chrono::steady_clock::now() >= deadline) {
@@ -198,40 +216,89 @@ Result<api::JobStatus> Jobs::Wait(const std::string& id, uint64_t after_version,
   }
 }
 
-void Jobs::Run(const std::string& id) {
+Result<api::JobStatus> Jobs::WaitInStore(const std::string& id, uint64_t after_version,
+                                         std::chrono::steady_clock::time_point deadline) {
+  while (true) {
+    auto status = FromStore(id);
+    if (!status.ok() || status->version > after_version || status->state == "succeeded" ||
+        status->state == "failed" || draining_ || std::chrono::steady_clock::now() >= deadline) {
+      return status;
+    }
+    std::this_thread::sleep_for(kStorePollInterval);
+    bool running_here = false;  // it may have started here meanwhile
+    {
+      std::lock_guard lock(board_mutex_);
+      running_here = board_.count(id) > 0;
+    }
+    if (running_here) {
+      const std::chrono::duration<double> left = deadline - std::chrono::steady_clock::now();
+      return Wait(id, after_version, left.count());
+    }
+  }
+}
+
+void Jobs::Run(const std::string& id, bool& interrupted) {
+  Store& store = *context_.store;
   std::shared_ptr<std::atomic<bool>> cancel;
   JobRecord job;
   {
     std::lock_guard lock(board_mutex_);
-    const auto found = board_.find(id);
-    if (found == board_.end()) return;  // deleted while queued
-    cancel = found->second.cancel;
-    job = found->second.record;
+    if (const auto found = board_.find(id); found != board_.end()) {
+      cancel = found->second.cancel;
+      job = found->second.record;
+    }
+  }
+  if (!cancel) {  // queued by another daemon on a shared store, or deleted while queued
+    auto stored = store.GetJob(id);
+    if (!stored.ok()) {  // the store is down: the queue keeps the job
+      spdlog::error("job {}: {}", id, stored.status().message());
+      interrupted = true;
+      return;
+    }
+    if (!stored->has_value()) return;
+    job = **stored;
+    if (job.state == "succeeded" || job.state == "failed") return;  // delivered again
+    LiveJob live;
+    live.record = job;
+    cancel = live.cancel;
+    std::lock_guard lock(board_mutex_);
+    live.version = store.shared() ? job.version : next_version_++;
+    board_[id] = std::move(live);
   }
   if (cancel->load()) return;
-  Store& store = *context_.store;
   const auto fail = [&](const std::string& code, const std::string& detail) {
     job.state = "failed";
     job.error_code = code;
     job.error_detail = detail;
     job.finished_ms = NowMs();
-    if (auto updated = store.UpdateJob(job); !updated.ok())
+    if (auto updated = store.UpdateJob(job); !updated.ok()) {
       spdlog::error("job {}: {}", id, updated.status().message());
+      interrupted = store.shared();  // the failure is told by the next run
+    }
     Publish(job, /*erase=*/true);
     ++context_.bake_metrics.failed;
     spdlog::warn("bake {} failed: {}: {}", id, code, detail);
   };
   // A storage fault is told without the server's paths (the log has them), as 'storage':
-  // the same bake submitted again runs again.
+  // the same bake submitted again runs again. On a shared store it is Redis restarting,
+  // most likely: the queue runs the job again (its runs count toward max_job_crashes).
   const auto fail_with = [&](const Status& status) {
     if (status.code() != StatusCode::kUnavailable) {
       return fail(StatusCodeName(status.code()), status.message());
     }
     spdlog::error("bake {}: {}", id, status.message());
+    if (store.shared()) {
+      interrupted = true;
+      return Publish(job, true);
+    }
     fail("storage", std::string(kStorageFaultDetail) + "; submit the same bake again to rerun it");
   };
+  // Running already: the daemon that ran it died (a shared store's queue took the job
+  // over from it).
+  if (job.state == "running" && job.attempts >= context_.config.max_job_crashes)
+    return fail("crashed", CrashedDetail(context_.config.max_job_crashes));
   auto bake = store.GetBake(id);
-  if (!bake.ok()) return fail("internal", bake.status().message());
+  if (!bake.ok()) return fail_with(bake.status());
   if (!bake->has_value()) return Publish(job, true);
   job.state = "running";
   job.attempts += 1;
@@ -241,20 +308,23 @@ void Jobs::Run(const std::string& id) {
   job.stage = "import";
   job.error_code.clear();
   job.error_detail.clear();
-  if (auto updated = store.UpdateJob(job); !updated.ok() || !*updated) return Publish(job, true);
+  if (auto updated = store.UpdateJob(job); !updated.ok()) return fail_with(updated.status());
+  else if (!*updated) return Publish(job, true);
   Publish(job);
   spdlog::info("bake {} running (attempt {})", id, job.attempts);
 
   auto request = api::ParseBakeRequest((*bake)->request_json);
   if (!request.ok()) return fail("internal", "stored request: " + request.status().message());
   auto character = store.GetCharacter((*bake)->character_id);
-  if (!character.ok() || !character->has_value()) return Publish(job, true);  // deleted meanwhile
+  if (!character.ok()) return fail_with(character.status());
+  if (!character->has_value()) return Publish(job, true);  // deleted meanwhile
   std::vector<pipeline::ClipSource> clips;
   std::vector<ClipIdentity> identities;
   std::map<std::string, std::shared_ptr<const io::Asset>> motion_files;  // by upload id
   for (const std::string& motion_id : (*bake)->clip_motions) {
     auto motion = store.GetMotion(motion_id);
-    if (!motion.ok() || !motion->has_value()) return Publish(job, true);  // deleted meanwhile
+    if (!motion.ok()) return fail_with(motion.status());
+    if (!motion->has_value()) return Publish(job, true);  // deleted meanwhile
     const MotionRecord& m = **motion;
     pipeline::ClipSource clip{nullptr, m.animation, ""};
     if (m.source == "file") {
@@ -281,14 +351,18 @@ void Jobs::Run(const std::string& id) {
   p.source_hash = MakeBakeKey(*request, identities, p.settings.Hash()).source_hash;
   const auto start = std::chrono::steady_clock::now();
   auto last_publish = start - std::chrono::seconds(1);
+  // Progress reaches this daemon's watchers every 50 ms; on a shared store it is written
+  // there too, every 250 ms, for the other daemons' watchers.
+  const auto publish_every = std::chrono::milliseconds(store.shared() ? 250 : 50);
   auto output = pipeline::Bake(
       p,
       [&](const pipeline::BakeProgress& progress) {
         job.progress = progress.fraction;
         job.stage = progress.stage;
         const auto now = std::chrono::steady_clock::now();
-        if (now - last_publish >= std::chrono::milliseconds(50) || progress.fraction >= 1.0) {
+        if (now - last_publish >= publish_every || progress.fraction >= 1.0) {
           last_publish = now;
+          if (store.shared()) (void)store.UpdateJob(job);
           Publish(job);
         }
       },
@@ -299,8 +373,9 @@ void Jobs::Run(const std::string& id) {
       job.progress = 0;
       job.stage = "";
       (void)store.UpdateJob(job);
+      interrupted = true;
       ++context_.bake_metrics.interrupted;
-      spdlog::info("bake {} interrupted by shutdown; it runs again at the next start", id);
+      spdlog::info("bake {} interrupted by shutdown; it runs again (at the next start, or now on another daemon of a shared store)", id);
     }
     return Publish(job, true);
   }

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <atomic>
+#include <chrono>
 #include <condition_variable>
 #include <cstdint>
 #include <map>
@@ -54,12 +55,17 @@ class Jobs {
     std::shared_ptr<std::atomic<bool>> cancel = std::make_shared<std::atomic<bool>>(false);
   };
 
-  void Run(const std::string& id);
+  // Runs the job; `interrupted`: it stopped before its end (shutdown, or a shared store
+  // that did not answer) and must run again.
+  void Run(const std::string& id, bool& interrupted);
   // Stores the levels and commits the bake; `written` receives the blobs it wrote.
   Status FinishBake(const BakeRecord& bake, pipeline::BakeOutput output, JobRecord& job,
                     std::vector<std::string>& written);
   void Publish(const JobRecord& record, bool erase = false);  // board update + notify
   Result<proto::api::JobStatus> FromStore(const std::string& id);
+  // Wait for a job not on the board: reads the store every kStorePollInterval.
+  Result<proto::api::JobStatus> WaitInStore(const std::string& id, uint64_t after_version,
+                                            std::chrono::steady_clock::time_point deadline);
   proto::api::JobStatus ToStatus(const JobRecord& record, uint64_t version) const;
 
   ServiceContext& context_;
@@ -69,7 +75,9 @@ class Jobs {
 
   std::mutex board_mutex_;
   std::condition_variable board_changed_;
-  std::map<std::string, LiveJob> board_;  // jobs queued or running in this process
+  // Jobs queued or running in this process (on a shared store, only those running here:
+  // a queued job may run on any daemon).
+  std::map<std::string, LiveJob> board_;
   uint64_t next_version_ = 1;
 };
 

@@ -5,7 +5,63 @@
 #include <filesystem>
 #include <set>
 
+#include "server/directory_blob_store.h"
+#include "server/memory_job_queue.h"
+#include "server/redis_job_queue.h"
+#include "server/redis_store.h"
+#include "server/sqlite_store.h"
+
 namespace motionlod::server {
+namespace {
+
+// The store, the blob store and the job queue the configuration names.
+Status OpenStorage(const Config& config, ServiceContext& context) {
+  const std::filesystem::path blob_dir = config.blob_dir.empty()
+                                             ? std::filesystem::path(config.data_dir) / "blobs"
+                                             : std::filesystem::path(config.blob_dir);
+  std::shared_ptr<RedisPool> redis;
+  if (config.backend == "redis") {
+    auto endpoint = ParseRedisUrl(config.redis_url);
+    if (!endpoint.ok()) return endpoint.status();
+    redis = std::make_shared<RedisPool>(*endpoint, config.redis_timeout_seconds);
+    context.store = std::make_unique<RedisStore>(redis, config.redis_prefix);
+    context.make_queue = [redis, prefix = config.redis_prefix,
+                          visibility = config.job_visibility_seconds](
+                             size_t capacity, int workers,
+                             JobQueue::Runner run) -> StatusOr<std::unique_ptr<JobQueue>> {
+      auto queue =
+          RedisJobQueue::Open(redis, prefix, capacity, workers, visibility, std::move(run));
+      if (!queue.ok()) return queue.status();
+      return std::unique_ptr<JobQueue>(std::move(*queue));
+    };
+    // The URL may hold a password: the log names where, not how.
+    const std::string where = endpoint->socket_path.empty()
+                                  ? endpoint->host + ":" + std::to_string(endpoint->port)
+                                  : endpoint->socket_path;
+    spdlog::info("backend redis at {} (keys {}*), blobs in {}", where, config.redis_prefix,
+                 config.blob_store == "redis" ? "redis" : blob_dir.string());
+  } else {
+    auto store = SqliteStore::Open(std::filesystem::path(config.data_dir) / "motionlodd.db");
+    if (!store.ok()) return store.status();
+    context.store = std::move(*store);
+    context.make_queue = [](size_t capacity, int workers, JobQueue::Runner run)
+        -> StatusOr<std::unique_ptr<JobQueue>> {
+      return std::unique_ptr<JobQueue>(
+          std::make_unique<MemoryJobQueue>(capacity, workers, std::move(run)));
+    };
+  }
+  if (config.blob_store == "redis") {
+    context.blobs =
+        std::make_unique<RedisBlobStore>(redis, config.redis_prefix, config.redis_max_blob_bytes);
+    return Status::Ok();
+  }
+  auto blobs = DirectoryBlobStore::Open(blob_dir, config.backend == "redis");
+  if (!blobs.ok()) return blobs.status();
+  context.blobs = std::move(*blobs);
+  return Status::Ok();
+}
+
+}  // namespace
 
 Service::Service(const Config& config)
     : context_(config),
@@ -40,14 +96,11 @@ StatusOr<std::unique_ptr<Service>> Service::Open(const Config& config) {
     spdlog::warn("imports run as plain processes with limits only: bubblewrap does not work ({})",
                  context.importer->fallback_reason());
   }
-  auto store = Store::Open(std::filesystem::path(config.data_dir) / "motionlodd.db");
-  if (!store.ok()) return store.status();
-  context.store = std::move(*store);
-  auto blobs = BlobStore::Open(std::filesystem::path(config.data_dir) / "blobs");
-  if (!blobs.ok()) return blobs.status();
-  context.blobs = std::move(*blobs);
+  if (Status status = OpenStorage(config, context); !status.ok()) return status;
   // Blobs no row names (a crash between writing them and committing, or a delete that
-  // stopped half way) are removed.
+  // stopped half way) are removed; not in a shared store, where another daemon may be
+  // between the two now.
+  if (context.store->shared()) return service;
   auto referenced = context.store->ReferencedBlobs();
   if (!referenced.ok()) return referenced.status();
   const std::set<std::string> keep(referenced->begin(), referenced->end());
@@ -68,8 +121,11 @@ void Service::Shutdown() { jobs_.Shutdown(); }
 Status Service::Ready() {
   if (jobs_.draining()) return Status(StatusCode::kUnavailable, "the daemon is shutting down");
   if (jobs_.queue() == nullptr) return Status(StatusCode::kUnavailable, "the daemon is starting");
-  if (!context_.store->Healthy())
-    return Status(StatusCode::kUnavailable, "the database does not answer");
+  if (!context_.store->Healthy()) {
+    return Status(StatusCode::kUnavailable, context_.store->shared()
+                                                ? "Redis does not answer"
+                                                : "the database does not answer");
+  }
   return context_.blobs->CheckWritable(context_.config.min_free_bytes);
 }
 

@@ -5,6 +5,7 @@
 
 #include <atomic>
 #include <cstdint>
+#include <functional>
 #include <list>
 #include <memory>
 #include <mutex>
@@ -21,6 +22,7 @@
 #include "server/blob_store.h"
 #include "server/config.h"
 #include "server/import_sandbox.h"
+#include "server/job_queue.h"
 #include "server/level_cache.h"
 #include "server/metrics.h"
 #include "server/store.h"
@@ -63,7 +65,8 @@ ServiceError Error(ErrorKind kind, std::string detail, int retry_after = 0);
 ServiceError Internal(const Status& status);
 // What a client is told of a storage fault: no server path, and what to do.
 inline constexpr const char* kStorageFaultDetail =
-    "the daemon's data directory cannot be written now (full or read-only); retry later";
+    "the daemon's storage cannot be written now (a full or read-only data directory, or its "
+    "Redis not answering); retry later";
 
 // The 404 for an id that cannot name anything (not 64 lower-case hex digits), answered
 // before any lookup.
@@ -124,6 +127,11 @@ struct ServiceContext {
   const Config config;
   std::unique_ptr<Store> store;
   std::unique_ptr<BlobStore> blobs;
+  // Makes the job queue Jobs::Start drains (a MemoryJobQueue, or a RedisJobQueue that the
+  // daemons on one Redis share).
+  std::function<StatusOr<std::unique_ptr<JobQueue>>(size_t capacity, int workers,
+                                                     JobQueue::Runner run)>
+      make_queue;
   std::unique_ptr<ImportSandbox> importer;
   LevelCache cache;
   AssetCache assets;

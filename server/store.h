@@ -1,22 +1,17 @@
-// The daemon's metadata in an embedded SQLite database (<data>/motionlodd.db, WAL
-// journal, foreign keys on, synchronous FULL, busy timeout): characters, motions, bakes,
-// their levels and jobs. Bytes (uploads, level sets, single levels) live in the BlobStore;
-// rows name them by SHA-256. One connection behind a mutex: every method is thread-safe
-// and each write is one transaction.
+// The daemon's metadata: characters, motions, bakes, their levels and jobs, as records.
+// Bytes (uploads, level sets, single levels) live in a BlobStore; records name them by
+// SHA-256. Two implementations: SqliteStore (server/sqlite_store.h, one daemon, the
+// default) and RedisStore (server/redis_store.h, daemons sharing one Redis). Every
+// method is thread-safe and each write is atomic: all of it or none.
 #pragma once
 
 #include <cstdint>
-#include <filesystem>
 #include <map>
-#include <memory>
-#include <mutex>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include "base/status.h"
-
-struct sqlite3;
 
 namespace motionlod::server {
 
@@ -81,46 +76,60 @@ struct JobRecord {
   std::string error_code, error_detail;
   int attempts = 0;
   int64_t created_ms = 0, started_ms = 0, finished_ms = 0;
+  // Bumped by every UpdateJob of a shared store (RedisStore), so that every daemon answers
+  // one version for one state; 0 in a store of one daemon, whose versions are its own.
+  uint64_t version = 0;
 };
+
+// The JSON text both stores keep file lists and string lists in, and back (text that is
+// not such a list reads as an empty one).
+std::string FilesToJson(const std::vector<FileRecord>& files);
+std::vector<FileRecord> FilesFromJson(const std::string& text);
+std::string ListToJson(const std::vector<std::string>& items);
+std::vector<std::string> ListFromJson(const std::string& text);
+
+// The error detail of a job failed as 'crashed' after `max_runs` runs that the daemon
+// running it did not survive.
+std::string CrashedDetail(int max_runs);
 
 class Store {
  public:
-  static StatusOr<std::unique_ptr<Store>> Open(const std::filesystem::path& file);
-  ~Store();
-  Store(const Store&) = delete;
-  Store& operator=(const Store&) = delete;
+  virtual ~Store() = default;
 
   // Characters and their embedded animations in one transaction; false when the id was
   // already present (nothing written).
-  StatusOr<bool> InsertCharacter(const CharacterRecord& character,
-                                 const std::vector<MotionRecord>& motions);
-  StatusOr<std::optional<CharacterRecord>> GetCharacter(const std::string& id);
-  StatusOr<std::vector<CharacterRecord>> ListCharacters();
+  virtual StatusOr<bool> InsertCharacter(const CharacterRecord& character,
+                                 const std::vector<MotionRecord>& motions) = 0;
+  virtual StatusOr<std::optional<CharacterRecord>> GetCharacter(const std::string& id) = 0;
+  virtual StatusOr<std::vector<CharacterRecord>> ListCharacters() = 0;
   // Deletes the character with its motions, bakes, levels and jobs. Returns the blobs the
   // deleted rows named (to collect when nothing else names them); kNotFound when absent.
-  StatusOr<std::vector<std::string>> DeleteCharacter(const std::string& id);
+  virtual StatusOr<std::vector<std::string>> DeleteCharacter(const std::string& id) = 0;
 
   // Motions already present are left as they are.
-  Status InsertMotions(const std::vector<MotionRecord>& motions);
-  StatusOr<std::optional<MotionRecord>> GetMotion(const std::string& id);
-  StatusOr<std::vector<MotionRecord>> ListMotions(const std::string& character_id);
+  virtual Status InsertMotions(const std::vector<MotionRecord>& motions) = 0;
+  virtual StatusOr<std::optional<MotionRecord>> GetMotion(const std::string& id) = 0;
+  virtual StatusOr<std::vector<MotionRecord>> ListMotions(const std::string& character_id) = 0;
 
   // The bake (with its clips) and its job in one transaction; false when the bake
   // already existed.
-  StatusOr<bool> InsertBakeAndJob(const BakeRecord& bake, const JobRecord& job);
-  StatusOr<std::optional<BakeRecord>> GetBake(const std::string& id);
-  StatusOr<std::vector<BakeRecord>> ListBakes(const std::string& character_id);  // "" = all
-  StatusOr<std::vector<LevelRecord>> GetLevels(const std::string& bake_id);
+  virtual StatusOr<bool> InsertBakeAndJob(const BakeRecord& bake, const JobRecord& job) = 0;
+  virtual StatusOr<std::optional<BakeRecord>> GetBake(const std::string& id) = 0;
+  // "" = all.
+  virtual StatusOr<std::vector<BakeRecord>> ListBakes(const std::string& character_id) = 0;
+  virtual StatusOr<std::vector<LevelRecord>> GetLevels(const std::string& bake_id) = 0;
   // Deletes the bake, its levels and its job; returns the blobs they named.
-  StatusOr<std::vector<std::string>> DeleteBake(const std::string& id);
+  virtual StatusOr<std::vector<std::string>> DeleteBake(const std::string& id) = 0;
 
-  // A finished bake: its level set, report and levels, and the job's final record.
-  Status CompleteBake(const BakeRecord& bake, const std::vector<LevelRecord>& levels,
-                      const JobRecord& job);
+  // A finished bake: its level set, report and levels, and the job's final record (whose
+  // version a shared store bumps).
+  virtual Status CompleteBake(const BakeRecord& bake, const std::vector<LevelRecord>& levels,
+                              JobRecord& job) = 0;
 
-  StatusOr<std::optional<JobRecord>> GetJob(const std::string& id);
-  // Updates state, progress, stage, error, attempts and times; false when the job is gone.
-  StatusOr<bool> UpdateJob(const JobRecord& job);
+  virtual StatusOr<std::optional<JobRecord>> GetJob(const std::string& id) = 0;
+  // Updates state, progress, stage, error, attempts and times (and bumps `job.version` in
+  // a shared store); false when the job is gone.
+  virtual StatusOr<bool> UpdateJob(JobRecord& job) = 0;
   // The jobs left unfinished when the daemon stopped, to run again.
   struct UnfinishedJobs {
     std::vector<std::string> requeued;  // queued, oldest first; running ones set back to queued
@@ -128,28 +137,23 @@ class Store {
   };
   // A job found running was running when the daemon died (a shutdown leaves them queued).
   // One that has started max_runs runs is failed ('crashed', at `now_ms`), not run again:
-  // a bake that takes the daemon down every time must not take it down forever.
-  StatusOr<UnfinishedJobs> TakeUnfinishedJobs(int max_runs, int64_t now_ms);
-  StatusOr<std::map<std::string, int64_t>> CountJobsByState();
+  // a bake that takes the daemon down every time must not take it down forever. A shared
+  // store returns none: its queue holds the unfinished jobs, and Jobs::Run applies the cap.
+  virtual StatusOr<UnfinishedJobs> TakeUnfinishedJobs(int max_runs, int64_t now_ms) = 0;
+  virtual StatusOr<std::map<std::string, int64_t>> CountJobsByState() = 0;
 
   // The byte size of a stored single level, nullopt when no bake has that level.
-  StatusOr<std::optional<int64_t>> LevelBytes(const std::string& hash);
+  virtual StatusOr<std::optional<int64_t>> LevelBytes(const std::string& hash) = 0;
   // Whether any row still names this blob.
-  StatusOr<bool> IsBlobReferenced(const std::string& hash);
+  virtual StatusOr<bool> IsBlobReferenced(const std::string& hash) = 0;
   // Every blob any row names.
-  StatusOr<std::vector<std::string>> ReferencedBlobs();
+  virtual StatusOr<std::vector<std::string>> ReferencedBlobs() = 0;
 
   // A trivial query: the database answers.
-  bool Healthy();
-
- private:
-  explicit Store(sqlite3* db) : db_(db) {}
-  Status Migrate();
-  // Reads the clips of a bake read without them.
-  Status ReadClipMotions(BakeRecord& bake);
-
-  std::mutex mutex_;
-  sqlite3* db_ = nullptr;
+  virtual bool Healthy() = 0;
+  // Whether other daemons work on the same records (their jobs run elsewhere, their blobs
+  // may be written now by another process).
+  virtual bool shared() const = 0;
 };
 
 }  // namespace motionlod::server

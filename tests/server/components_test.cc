@@ -15,15 +15,15 @@
 #include <thread>
 
 #include "io/sha256.h"
-#include "server/blob_store.h"
+#include "server/directory_blob_store.h"
 #include "server/http.h"
 #include "server/http_server.h"
-#include "server/job_queue.h"
+#include "server/memory_job_queue.h"
 #include "server/level_cache.h"
 #include "server/metrics.h"
 #include "server/routes.h"
 #include "server/service.h"
-#include "server/store.h"
+#include "server/sqlite_store.h"
 #include "tests/server/daemon.h"
 
 namespace motionlod::server {
@@ -66,10 +66,11 @@ TEST(JobQueue, RefusesBeyondCapacityExceptWhenForcedAndRunsInOrder) {
   std::condition_variable cv;
   bool release = false;
   std::vector<std::string> ran;
-  JobQueue queue(2, 1, [&](const std::string& id) {
+  MemoryJobQueue queue(2, 1, [&](const std::string& id) {
     std::unique_lock lock(mutex);
     cv.wait(lock, [&] { return release; });
     ran.push_back(id);
+    return JobQueue::RunOutcome::kFinished;
   });
   EXPECT_EQ(queue.Push("a"), JobQueue::PushResult::kQueued);
   while (queue.running() == 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
@@ -94,7 +95,7 @@ TEST(JobQueue, RefusesBeyondCapacityExceptWhenForcedAndRunsInOrder) {
 
 TEST(BlobStore, WritesAtomicallyUnderTheHashAndDetectsCorruption) {
   const fs::path dir = testing::TestDirectory();
-  auto store = BlobStore::Open(dir / "blobs");
+  auto store = DirectoryBlobStore::Open(dir / "blobs", /*shared=*/false);
   ASSERT_TRUE(store.ok());
   auto hash = (*store)->Put("hello");
   ASSERT_TRUE(hash.ok());
@@ -107,10 +108,18 @@ TEST(BlobStore, WritesAtomicallyUnderTheHashAndDetectsCorruption) {
   EXPECT_EQ((*store)->Get(*hash).status().code(), StatusCode::kDataLoss);
   EXPECT_EQ((*store)->Get(std::string(64, 'a')).status().code(), StatusCode::kNotFound);
   EXPECT_EQ((*store)->Get("../../etc/passwd").status().code(), StatusCode::kInvalidArgument);
-  // A temporary file left by a crash is removed at the next open.
-  std::ofstream(file.parent_path() / ".tmp-abc123") << "partial";
-  ASSERT_TRUE(BlobStore::Open(dir / "blobs").ok());
-  EXPECT_FALSE(fs::exists(file.parent_path() / ".tmp-abc123"));
+  // Temporary files a crash left are removed at the next open; in a shared directory only
+  // those an hour old, since a younger one may be another daemon's write in progress.
+  const fs::path stale = file.parent_path() / ".tmp-abc123";
+  const fs::path fresh = file.parent_path() / ".tmp-def456";
+  std::ofstream(stale) << "partial";
+  std::ofstream(fresh) << "partial";
+  fs::last_write_time(stale, fs::file_time_type::clock::now() - std::chrono::minutes(61));
+  ASSERT_TRUE(DirectoryBlobStore::Open(dir / "blobs", /*shared=*/true).ok());
+  EXPECT_FALSE(fs::exists(stale));
+  EXPECT_TRUE(fs::exists(fresh));
+  ASSERT_TRUE(DirectoryBlobStore::Open(dir / "blobs", /*shared=*/false).ok());
+  EXPECT_FALSE(fs::exists(fresh));
   fs::remove_all(dir);
 }
 
@@ -172,7 +181,7 @@ INSERT INTO jobs (id, bake_id, state, created_ms) VALUES ('b1', 'b1', 'succeeded
     sqlite3_close(db);
   }
   for (int open = 0; open < 2; ++open) {  // migrated, then read as it is
-    auto store = Store::Open(dir / "db");
+    auto store = SqliteStore::Open(dir / "db");
     ASSERT_TRUE(store.ok()) << store.status().message();
     auto b1 = (*store)->GetBake("b1");
     ASSERT_TRUE(b1.ok() && b1->has_value());
@@ -192,7 +201,7 @@ INSERT INTO jobs (id, bake_id, state, created_ms) VALUES ('b1', 'b1', 'succeeded
               SQLITE_OK);
     sqlite3_close(db);
   }
-  auto refused = Store::Open(dir / "db");
+  auto refused = SqliteStore::Open(dir / "db");
   ASSERT_FALSE(refused.ok());
   EXPECT_EQ(refused.status().code(), StatusCode::kUnsupported);
   EXPECT_NE(refused.status().message().find("schema version 3"), std::string::npos);
@@ -203,7 +212,7 @@ INSERT INTO jobs (id, bake_id, state, created_ms) VALUES ('b1', 'b1', 'succeeded
 TEST(Store, KeepsJobsAcrossReopensAndRequeuesTheUnfinished) {
   const fs::path dir = testing::TestDirectory();
   {
-    auto store = Store::Open(dir / "db");
+    auto store = SqliteStore::Open(dir / "db");
     ASSERT_TRUE(store.ok()) << store.status().message();
     CharacterRecord c;
     c.id = std::string(64, 'c');
@@ -249,7 +258,7 @@ TEST(Store, KeepsJobsAcrossReopensAndRequeuesTheUnfinished) {
     EXPECT_EQ((**(*store)->GetCharacter(c.id)).joint_names,
               (std::vector<std::string>{"root", "hip"}));
   }
-  auto store = Store::Open(dir / "db");
+  auto store = SqliteStore::Open(dir / "db");
   ASSERT_TRUE(store.ok());
   auto unfinished = (*store)->TakeUnfinishedJobs(3, 1234);
   ASSERT_TRUE(unfinished.ok());

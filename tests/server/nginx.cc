@@ -1,9 +1,7 @@
 #include "tests/server/nginx.h"
 
 #include <fcntl.h>
-#include <netinet/in.h>
 #include <signal.h>
-#include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -12,38 +10,12 @@
 #include <thread>
 
 #include "tests/server/daemon.h"
+#include "tests/server/loopback.h"
 
 namespace motionlod::server::testing {
 namespace {
 
 constexpr const char* kBinary = "/usr/sbin/nginx";
-
-// A loopback port free now (the kernel's choice for a socket bound to port 0).
-int FreePort() {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in address{};
-  address.sin_family = AF_INET;
-  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  socklen_t length = sizeof address;
-  int port = 0;
-  if (::bind(fd, reinterpret_cast<sockaddr*>(&address), sizeof address) == 0 &&
-      ::getsockname(fd, reinterpret_cast<sockaddr*>(&address), &length) == 0) {
-    port = ntohs(address.sin_port);
-  }
-  ::close(fd);
-  return port;
-}
-
-bool Accepts(int port) {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in address{};
-  address.sin_family = AF_INET;
-  address.sin_port = htons(static_cast<uint16_t>(port));
-  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  const bool connected = ::connect(fd, reinterpret_cast<sockaddr*>(&address), sizeof address) == 0;
-  ::close(fd);
-  return connected;
-}
 
 void Replace(std::string& text, const std::string& from, const std::string& to) {
   const size_t at = text.find(from);
@@ -61,12 +33,19 @@ Nginx::~Nginx() {
   ::waitpid(pid_, &status, 0);
 }
 
-bool Nginx::Start(int daemon_port) {
+bool Nginx::Start(const std::vector<int>& daemon_ports) {
   std::filesystem::create_directories(dir_ / "logs");
   port_ = FreePort();
   std::string site = ReadFile(SourcePath("deploy/nginx/motionlod.conf"));
   Replace(site, "listen 8080", "listen 127.0.0.1:" + std::to_string(port_));
-  Replace(site, "server 127.0.0.1:8081", "server 127.0.0.1:" + std::to_string(daemon_port));
+  const std::string server_line = "  server 127.0.0.1:8081 max_fails=3 fail_timeout=10s;\n";
+  std::string servers;
+  for (int daemon_port : daemon_ports) {
+    std::string line = server_line;
+    Replace(line, "8081", std::to_string(daemon_port));
+    servers += line;
+  }
+  Replace(site, server_line, servers);
   Replace(site, "/var/cache/nginx/motionlod", (dir_ / "cache").string());
   std::ofstream(dir_ / "motionlod.conf") << site;
   const std::string prefix = dir_.string() + "/";

@@ -9,6 +9,7 @@
 
 #include <filesystem>
 #include <string>
+#include <vector>
 
 namespace motionlod::server::testing {
 
@@ -21,9 +22,11 @@ class Nginx {
 
   // True when an nginx binary is installed.
   static bool Installed();
-  // Starts nginx proxying to 127.0.0.1:`daemon_port` on a free loopback port; false
-  // (with nginx's error log in `error`) when it did not accept connections within 10 s.
-  bool Start(int daemon_port);
+  // Starts nginx proxying to 127.0.0.1 at `daemon_ports` (round-robin) on a free loopback
+  // port; false (with nginx's error log in `error`) when it did not accept connections
+  // within 10 s.
+  bool Start(const std::vector<int>& daemon_ports);
+  bool Start(int daemon_port) { return Start(std::vector<int>{daemon_port}); }
   int port() const { return port_; }
   std::string error;
 

@@ -1,4 +1,4 @@
-#include "server/blob_store.h"
+#include "server/directory_blob_store.h"
 
 #include <fcntl.h>
 #include <sys/statvfs.h>
@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <chrono>
 #include <cstring>
 #include <vector>
 
@@ -55,7 +56,7 @@ Status EnsureDirectory(const fs::path& dir) {
 
 }  // namespace
 
-Status BlobStore::CheckWritable(int64_t min_free_bytes) const {
+Status DirectoryBlobStore::CheckWritable(int64_t min_free_bytes) const {
   struct statvfs space {};
   if (::statvfs(root_.c_str(), &space) == 0) {
     const auto free_bytes = static_cast<int64_t>(space.f_bavail) * static_cast<int64_t>(space.f_frsize);
@@ -77,33 +78,30 @@ Status BlobStore::CheckWritable(int64_t min_free_bytes) const {
   return Status::Ok();
 }
 
-StatusOr<std::unique_ptr<BlobStore>> BlobStore::Open(const fs::path& root) {
+StatusOr<std::unique_ptr<DirectoryBlobStore>> DirectoryBlobStore::Open(const fs::path& root, bool shared) {
   std::error_code error;
   fs::create_directories(root / "sha256", error);
   if (error)
     return Status(StatusCode::kInternal, "cannot create " + root.string() + ": " + error.message());
-  auto store = std::unique_ptr<BlobStore>(new BlobStore(root));
-  // Temporary files are only ever written by this process: any present now are the
-  // remains of a crash.
+  auto store = std::unique_ptr<DirectoryBlobStore>(new DirectoryBlobStore(root));
+  // Temporary files are the remains of a crash; in a shared directory, only those an hour
+  // old (younger ones may be another daemon's writes in progress).
+  const auto stale = shared ? fs::file_time_type::clock::now() - std::chrono::hours(1)
+                            : fs::file_time_type::max();
   for (const auto& entry : fs::recursive_directory_iterator(root / "sha256", error)) {
-    if (entry.is_regular_file() && entry.path().filename().string().rfind(kTempPrefix, 0) == 0) {
+    if (entry.is_regular_file() && entry.path().filename().string().rfind(kTempPrefix, 0) == 0 &&
+        entry.last_write_time(error) < stale) {
       fs::remove(entry.path(), error);
     }
   }
   return store;
 }
 
-fs::path BlobStore::PathOf(std::string_view hash) const {
+fs::path DirectoryBlobStore::PathOf(std::string_view hash) const {
   return root_ / "sha256" / std::string(hash.substr(0, 2)) / std::string(hash.substr(2));
 }
 
-StatusOr<std::string> BlobStore::Put(std::string_view bytes) {
-  std::string hash = io::Sha256Hex(bytes);
-  if (Status status = PutWithHash(hash, bytes); !status.ok()) return status;
-  return hash;
-}
-
-Status BlobStore::PutWithHash(std::string_view hash, std::string_view bytes) {
+Status DirectoryBlobStore::PutWithHash(std::string_view hash, std::string_view bytes) {
   if (!proto::api::IsContentId(hash)) return InvalidArgument("malformed blob id");
   const fs::path path = PathOf(hash);
   if (::access(path.c_str(), F_OK) == 0) return Status::Ok();
@@ -124,7 +122,7 @@ Status BlobStore::PutWithHash(std::string_view hash, std::string_view bytes) {
   return FsyncPath(dir, O_RDONLY | O_DIRECTORY);
 }
 
-StatusOr<std::string> BlobStore::Get(std::string_view hash) const {
+StatusOr<std::string> DirectoryBlobStore::Get(std::string_view hash) const {
   if (!proto::api::IsContentId(hash)) return InvalidArgument("malformed blob id");
   const fs::path path = PathOf(hash);
   const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
@@ -152,17 +150,17 @@ StatusOr<std::string> BlobStore::Get(std::string_view hash) const {
   return bytes;
 }
 
-bool BlobStore::Contains(std::string_view hash) const {
+bool DirectoryBlobStore::Contains(std::string_view hash) const {
   return proto::api::IsContentId(hash) && ::access(PathOf(hash).c_str(), F_OK) == 0;
 }
 
-Status BlobStore::Remove(std::string_view hash) {
+Status DirectoryBlobStore::Remove(std::string_view hash) {
   if (!proto::api::IsContentId(hash)) return InvalidArgument("malformed blob id");
   if (::unlink(PathOf(hash).c_str()) != 0 && errno != ENOENT) return Errno("unlink blob");
   return Status::Ok();
 }
 
-std::vector<std::string> BlobStore::List() const {
+std::vector<std::string> DirectoryBlobStore::List() const {
   std::vector<std::string> hashes;
   std::error_code error;
   for (const auto& prefix : fs::directory_iterator(root_ / "sha256", error)) {

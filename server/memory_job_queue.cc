@@ -1,17 +1,17 @@
-#include "server/job_queue.h"
+#include "server/memory_job_queue.h"
 
 #include <algorithm>
 
 namespace motionlod::server {
 
-JobQueue::JobQueue(size_t capacity, int workers, Runner run)
+MemoryJobQueue::MemoryJobQueue(size_t capacity, int workers, Runner run)
     : capacity_(capacity), run_(std::move(run)) {
   for (int w = 0; w < std::max(1, workers); ++w) workers_.emplace_back([this] { Work(); });
 }
 
-JobQueue::~JobQueue() { Stop(); }
+MemoryJobQueue::~MemoryJobQueue() { Stop(); }
 
-JobQueue::PushResult JobQueue::Push(const std::string& id, bool force) {
+JobQueue::PushResult MemoryJobQueue::Push(const std::string& id, bool force) {
   {
     std::lock_guard lock(mutex_);
     if (stopping_) return PushResult::kStopped;
@@ -24,24 +24,24 @@ JobQueue::PushResult JobQueue::Push(const std::string& id, bool force) {
   return PushResult::kQueued;
 }
 
-bool JobQueue::Remove(const std::string& id) {
+bool MemoryJobQueue::Remove(const std::string& id) {
   std::lock_guard lock(mutex_);
   if (!waiting_ids_.erase(id)) return false;
   waiting_.erase(std::find(waiting_.begin(), waiting_.end(), id));
   return true;
 }
 
-size_t JobQueue::depth() const {
+size_t MemoryJobQueue::depth() const {
   std::lock_guard lock(mutex_);
   return waiting_.size();
 }
 
-size_t JobQueue::running() const {
+size_t MemoryJobQueue::running() const {
   std::lock_guard lock(mutex_);
   return running_;
 }
 
-void JobQueue::StopTaking() {
+void MemoryJobQueue::StopTaking() {
   {
     std::lock_guard lock(mutex_);
     stopping_ = true;
@@ -49,14 +49,14 @@ void JobQueue::StopTaking() {
   ready_.notify_all();
 }
 
-void JobQueue::Stop() {
+void MemoryJobQueue::Stop() {
   StopTaking();
   for (std::thread& worker : workers_) {
     if (worker.joinable()) worker.join();
   }
 }
 
-void JobQueue::Work() {
+void MemoryJobQueue::Work() {
   while (true) {
     std::string id;
     {
@@ -68,7 +68,7 @@ void JobQueue::Work() {
       waiting_ids_.erase(id);
       ++running_;
     }
-    run_(id);
+    (void)run_(id);  // an interrupted job stays queued in the store for the next start
     std::lock_guard lock(mutex_);
     --running_;
   }
