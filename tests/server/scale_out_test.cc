@@ -56,10 +56,13 @@ class ScaleOut : public ::testing::Test {
 
   // Daemon `d` on the shared Redis and blob directory; one bake at a time each, and a
   // job silent for 2 s is taken over (60 s in production).
-  bool StartDaemon(int d) {
-    return daemons_[d]->Start({"--backend", "redis", "--redis-url", redis_->url(), "--blob-dir",
-                               (dir_ / "blobs").string(), "--threads", "1", "--bake-threads", "1",
-                               "--job-visibility-seconds", "2", "--redis-timeout-seconds", "1"});
+  bool StartDaemon(int d, const std::vector<std::string>& more = {}) {
+    std::vector<std::string> args = {"--backend", "redis", "--redis-url", redis_->url(),
+                                     "--blob-dir", (dir_ / "blobs").string(), "--threads", "1",
+                                     "--bake-threads", "1", "--job-visibility-seconds", "2",
+                                     "--redis-timeout-seconds", "1"};
+    args.insert(args.end(), more.begin(), more.end());
+    return daemons_[d]->Start(args);
   }
 
   std::unique_ptr<httplib::Client> Client(int d) { return daemons_[d]->Client(); }
@@ -212,6 +215,33 @@ TEST_F(ScaleOut, AKilledDaemonsJobIsTakenOverAndKillingAllThreeLosesNothing) {
   }
   ExpectEveryDaemonServesTheLevels(ids[0]);
   ExpectEveryDaemonServesTheLevels(ids.back());
+}
+
+// The poison-job cap holds across daemons: a bake whose daemon died max_job_crashes times
+// is failed ('crashed') by the daemon that takes it over, not run again.
+TEST_F(ScaleOut, AJobWhoseDaemonsDiedMaxJobCrashesTimesIsFailedNotRunAgain) {
+  for (int d = 0; d < kDaemons; ++d) {
+    EXPECT_EQ(daemons_[d]->Stop(SIGTERM), 0);
+    ASSERT_TRUE(StartDaemon(d, {"--max-job-crashes", "1"})) << daemons_[d]->error;
+  }
+  const std::string character = UploadSample();
+  ASSERT_FALSE(character.empty());
+  const std::string id = Submit(0, {{"character", character}, {"motion", "Running_A"}});
+  int running_on = -1;
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (running_on < 0 && std::chrono::steady_clock::now() < deadline) {
+    for (int d = 0; d < kDaemons && running_on < 0; ++d) {
+      auto client = Client(d);
+      if (Gauge(*client, "motionlodd_jobs_running") >= 1) running_on = d;
+    }
+  }
+  ASSERT_GE(running_on, 0);
+  EXPECT_EQ(daemons_[running_on]->Stop(SIGKILL), 128 + SIGKILL);
+  auto client = Client((running_on + 1) % kDaemons);
+  const json status = WaitForJob(*client, id, 60);
+  EXPECT_EQ(status.value("state", ""), "failed") << status.dump();
+  EXPECT_EQ(status["error"].value("code", ""), "crashed") << status.dump();
+  EXPECT_EQ(status.value("attempts", 0), 1) << status.dump();
 }
 
 TEST_F(ScaleOut, ARedisRestartLosesNoJobWhileDaemonsAnswer503AndServeCachedLevels) {
