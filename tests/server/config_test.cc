@@ -45,6 +45,14 @@ TEST(Config, TheShippedConfigFileParsesAndDocumentsEveryOption) {
                           "web_root",
                           "data_dir",
                           "min_free_bytes",
+                          "backend",
+                          "redis_url",
+                          "redis_prefix",
+                          "blob_store",
+                          "blob_dir",
+                          "redis_max_blob_bytes",
+                          "redis_timeout_seconds",
+                          "job_visibility_seconds",
                           "threads",
                           "bake_threads",
                           "queue_capacity",
@@ -142,6 +150,18 @@ TEST(Config, InvalidValuesAreRefusedWithTheOptionNamed) {
   EXPECT_NE(short_key.status().message().find("16"), std::string::npos);
   auto streams = Parse({"--max-streams", "64"}, Env({}));
   EXPECT_NE(streams.status().message().find("max_streams"), std::string::npos);
+  // The backend, from the environment as from the file, and what it needs.
+  const auto redis = Parse({}, Env({{"MOTIONLODD_BACKEND", "redis"},
+                                    {"MOTIONLODD_REDIS_URL", "redis://cache:6380/1"}}));
+  ASSERT_TRUE(redis.ok()) << redis.status().message();
+  EXPECT_EQ(redis->config.backend, "redis");
+  EXPECT_EQ(redis->config.redis_url, "redis://cache:6380/1");
+  auto backend = Parse({"--backend", "postgres"}, Env({}));
+  EXPECT_NE(backend.status().message().find("backend"), std::string::npos);
+  auto url = Parse({"--backend", "redis", "--redis-url", "http://cache"}, Env({}));
+  EXPECT_NE(url.status().message().find("redis_url"), std::string::npos);
+  auto blobs = Parse({"--blob-store", "redis"}, Env({}));
+  EXPECT_NE(blobs.status().message().find("needs backend"), std::string::npos);
   auto unknown = Parse({"--colour", "red"}, Env({}));
   EXPECT_FALSE(unknown.ok());
   auto missing = Parse({"--config", "/nonexistent/motionlodd.toml"}, Env({}));
