@@ -36,6 +36,11 @@ if [ "${MOTIONLOD_SANITIZE_TESTS:-1}" != 0 ]; then
   # validator (the daemon's export test), a drain at SIGTERM (the crash test's last stop).
   sanitizer_skip+='|^RealData\.CharacterWideLevelsServeEveryClip$|^Cli\.ExportsLevelsThatTheGltfValidatorAccepts$'
   sanitizer_skip+='|^DaemonRestart\.SigtermLeavesUnfinishedJobsQueuedForTheNextStart$'
+  # Processes killed and restarted, a minute or more here: the recovery code they drive
+  # runs here in the one-kill restart test, the poison-job test and the Redis backend's
+  # tests (the store, the queue's takeover, sixty bakes on three daemons).
+  sanitizer_skip+='|^CrashRestart\.|^DaemonRestart\.JobsQueuedOrRunningAtASigkill'
+  sanitizer_skip+='|^ScaleOut\.AKilledDaemons|^ScaleOut\.ARedisRestart'
   sanitizer_skip+='|^web_viewer_e2e$'  # minutes here; the server tests cover the daemon's routes
   ASAN_OPTIONS=halt_on_error=1:detect_leaks=1:abort_on_error=0 \
     LSAN_OPTIONS="suppressions=$PWD/scripts/lsan-suppressions.txt:print_suppressions=0" \

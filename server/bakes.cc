@@ -244,6 +244,11 @@ Result<Created<api::JobStatus>> Bakes::Submit(const api::BakeRequest& request) {
       if (!status.ok()) return status.error();
       return Created<api::JobStatus>{status.value(), true};
     }
+    // On a shared store a daemon may have died between storing the job and queueing it:
+    // a queued job is queued again (the queue drops an id it holds).
+    if (context_.store->shared() && existing->has_value() && (*existing)->state == "queued") {
+      if (auto queued = jobs_.Enqueue(**existing); !queued.ok()) return queued.error();
+    }
     auto status = jobs_.Get(key.id);
     if (!status.ok()) return status.error();
     return Created<api::JobStatus>{status.value(), false};

@@ -3,8 +3,8 @@
 #include <hiredis.h>
 
 #include <charconv>
-#include <optional>
 #include <cmath>
+#include <optional>
 
 namespace motionlod::server {
 namespace {

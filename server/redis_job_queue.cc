@@ -81,8 +81,8 @@ void SleepUnlessStopping(const std::atomic<bool>& stopping, std::chrono::millise
 
 }  // namespace
 
-RedisJobQueue::RedisJobQueue(std::shared_ptr<RedisPool> redis, std::string prefix,
-                             size_t capacity, double visibility_seconds, Runner run)
+RedisJobQueue::RedisJobQueue(std::shared_ptr<RedisPool> redis, std::string prefix, size_t capacity,
+                             double visibility_seconds, Runner run)
     : redis_(std::move(redis)),
       prefix_(std::move(prefix)),
       stream_(prefix_ + "jobs:stream"),
@@ -164,8 +164,8 @@ void RedisJobQueue::Work() {
   bool failing = false;
   while (!stopping_.load()) {
     // An entry whose daemon died (idle past the visibility timeout) first, then new ones.
-    auto claimed =
-        connection.Command({"XAUTOCLAIM", stream_, kGroup, consumer_, min_idle, "0-0", "COUNT", "1"});
+    auto claimed = connection.Command(
+        {"XAUTOCLAIM", stream_, kGroup, consumer_, min_idle, "0-0", "COUNT", "1"});
     StatusOr<RedisReply> read = claimed;
     std::vector<std::pair<std::string, std::string>> entries;
     if (claimed.ok() && claimed->elements.size() >= 2) entries = Entries(claimed->elements[1]);

@@ -365,10 +365,11 @@ StatusOr<std::vector<MotionRecord>> RedisStore::ListMotions(const std::string& c
   }
   // The character's own animations first, each group by time, then insertion (the set's
   // order), as the SQLite store lists them.
-  std::stable_sort(motions.begin(), motions.end(), [](const MotionRecord& a, const MotionRecord& b) {
-    return std::make_pair(a.source == "file", a.created_ms) <
-           std::make_pair(b.source == "file", b.created_ms);
-  });
+  std::stable_sort(motions.begin(), motions.end(),
+                   [](const MotionRecord& a, const MotionRecord& b) {
+                     return std::make_pair(a.source == "file", a.created_ms) <
+                            std::make_pair(b.source == "file", b.created_ms);
+                   });
   return motions;
 }
 
@@ -387,7 +388,7 @@ StatusOr<bool> RedisStore::InsertBakeAndJob(const BakeRecord& bake, const JobRec
 }
 
 StatusOr<std::vector<BakeRecord>> RedisStore::ReadBakes(const std::vector<std::string>& ids,
-                                                         bool reports) {
+                                                        bool reports) {
   std::vector<BakeRecord> bakes;
   for (const std::string& id : ids) {
     auto fields = ReadHash(prefix_ + "bake:" + id);
@@ -421,8 +422,8 @@ StatusOr<std::vector<LevelRecord>> RedisStore::GetLevels(const std::string& bake
   if (!array.is_array()) return levels;
   for (const json& l : array) {
     if (!l.is_array() || l.size() != 4) continue;
-    levels.push_back({l[0].get<int>(), l[1].get<int>(), l[2].get<std::string>(),
-                      l[3].get<int64_t>()});
+    levels.push_back(
+        {l[0].get<int>(), l[1].get<int>(), l[2].get<std::string>(), l[3].get<int64_t>()});
   }
   return levels;
 }
@@ -476,7 +477,8 @@ StatusOr<std::map<std::string, int64_t>> RedisStore::CountJobsByState() {
   if (!fields.ok()) return fields.status();
   std::map<std::string, int64_t> counts = {
       {"queued", 0}, {"running", 0}, {"succeeded", 0}, {"failed", 0}};
-  for (const auto& [state, count] : *fields) counts[state] = std::strtoll(count.c_str(), nullptr, 10);
+  for (const auto& [state, count] : *fields)
+    counts[state] = std::strtoll(count.c_str(), nullptr, 10);
   return counts;
 }
 

@@ -5,9 +5,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
-#include <chrono>
 #include <fstream>
-#include <thread>
 
 #include "tests/server/daemon.h"
 #include "tests/server/loopback.h"
@@ -71,16 +69,7 @@ bool Nginx::Start(const std::vector<int>& daemon_ports) {
   }
   if (pid < 0) return false;
   pid_ = pid;
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
-  while (std::chrono::steady_clock::now() < deadline) {
-    if (Accepts(port_)) return true;
-    int status = 0;
-    if (::waitpid(pid_, &status, WNOHANG) == pid_) {
-      pid_ = -1;
-      break;
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
+  if (WaitUntilAccepting(pid_, port_)) return true;
   error = "nginx did not start: " + ReadFile(stderr_path) +
           ReadFile((dir_ / "logs" / "error.log").string());
   return false;

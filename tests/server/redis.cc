@@ -4,8 +4,6 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
-#include <chrono>
-#include <thread>
 
 #include "tests/server/daemon.h"
 #include "tests/server/loopback.h"
@@ -44,16 +42,7 @@ bool Redis::Start() {
   }
   if (pid < 0) return false;
   pid_ = pid;
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
-  while (std::chrono::steady_clock::now() < deadline) {
-    if (Accepts(port_)) return true;
-    int status = 0;
-    if (::waitpid(pid_, &status, WNOHANG) == pid_) {
-      pid_ = -1;
-      break;
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
+  if (WaitUntilAccepting(pid_, port_)) return true;
   error = "redis-server did not start: " + ReadFile(log);
   return false;
 }

@@ -215,8 +215,8 @@ TEST(RedisUrl, ParsesHostsPortsDatabasesSocketsAndRefusesTheRest) {
   const RedisEndpoint socket = *ParseRedisUrl("unix:///run/redis.sock?db=1");
   EXPECT_EQ(socket.socket_path, "/run/redis.sock");
   EXPECT_EQ(socket.db, 1);
-  for (const char* bad : {"http://x", "redis://", "redis://h:0", "redis://h:99999", "redis://h/x",
-                          "unix://relative"})
+  for (const char* bad :
+       {"http://x", "redis://", "redis://h:0", "redis://h:99999", "redis://h/x", "unix://relative"})
     EXPECT_EQ(ParseRedisUrl(bad).status().code(), StatusCode::kInvalidArgument) << bad;
 }
 

@@ -25,8 +25,7 @@ constexpr int kDaemons = 3;
 const std::vector<std::string> kAnimations = {
     "Jump_Full_Long", "Jump_Full_Short", "Jump_Idle", "Jump_Land", "Jump_Start", "Running_A",
     "Running_B",      "T-Pose",          "Walking_A", "Walking_B", "Walking_C"};
-const std::vector<std::vector<int>> kLadders = {{20, 10}, {16, 6}, {12, 4},
-                                                {23, 8},  {18},    {14}};
+const std::vector<std::vector<int>> kLadders = {{20, 10}, {16, 6}, {12, 4}, {23, 8}, {18}, {14}};
 
 // A gauge of a daemon's /metrics; -1 when it cannot be read.
 double Gauge(httplib::Client& client, const std::string& name) {
@@ -57,10 +56,20 @@ class ScaleOut : public ::testing::Test {
   // Daemon `d` on the shared Redis and blob directory; one bake at a time each, and a
   // job silent for 2 s is taken over (60 s in production).
   bool StartDaemon(int d, const std::vector<std::string>& more = {}) {
-    std::vector<std::string> args = {"--backend", "redis", "--redis-url", redis_->url(),
-                                     "--blob-dir", (dir_ / "blobs").string(), "--threads", "1",
-                                     "--bake-threads", "1", "--job-visibility-seconds", "2",
-                                     "--redis-timeout-seconds", "1"};
+    std::vector<std::string> args = {"--backend",
+                                     "redis",
+                                     "--redis-url",
+                                     redis_->url(),
+                                     "--blob-dir",
+                                     (dir_ / "blobs").string(),
+                                     "--threads",
+                                     "1",
+                                     "--bake-threads",
+                                     "1",
+                                     "--job-visibility-seconds",
+                                     "2",
+                                     "--redis-timeout-seconds",
+                                     "1"};
     args.insert(args.end(), more.begin(), more.end());
     return daemons_[d]->Start(args);
   }
@@ -125,13 +134,14 @@ TEST_F(ScaleOut, SixtyBakesRoundRobinCompleteOnceEachAndEveryDaemonServesEveryLe
   for (const std::vector<int>& ladder : kLadders) {
     for (const std::string& animation : kAnimations) {
       if (requests.size() < 60)
-        requests.push_back({{"character", character}, {"motion", animation}, {"levels", ladder},
-                            {"fps", 30}});
+        requests.push_back(
+            {{"character", character}, {"motion", animation}, {"levels", ladder}, {"fps", 30}});
     }
   }
   ASSERT_EQ(requests.size(), 60u);
   std::vector<std::string> ids;
-  for (size_t r = 0; r < requests.size(); ++r) ids.push_back(Submit(static_cast<int>(r % kDaemons), requests[r]));
+  for (size_t r = 0; r < requests.size(); ++r)
+    ids.push_back(Submit(static_cast<int>(r % kDaemons), requests[r]));
   ASSERT_EQ(std::set<std::string>(ids.begin(), ids.end()).size(), 60u);
   // Each watched on another daemon than the one that took it.
   for (size_t r = 0; r < ids.size(); ++r) {
@@ -183,7 +193,8 @@ TEST_F(ScaleOut, AKilledDaemonsJobIsTakenOverAndKillingAllThreeLosesNothing) {
   // Daemon 1 is killed while it runs one.
   auto watcher = Client(1);
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-  while (Gauge(*watcher, "motionlodd_jobs_running") < 1 && std::chrono::steady_clock::now() < deadline)
+  while (Gauge(*watcher, "motionlodd_jobs_running") < 1 &&
+         std::chrono::steady_clock::now() < deadline)
     std::this_thread::sleep_for(std::chrono::milliseconds(2));
   EXPECT_EQ(daemons_[1]->Stop(SIGKILL), 128 + SIGKILL);
   // Its job is run by another daemon after the visibility timeout: two attempts.
@@ -200,11 +211,11 @@ TEST_F(ScaleOut, AKilledDaemonsJobIsTakenOverAndKillingAllThreeLosesNothing) {
   // More bakes (quick ones), then all three killed at once while some run and others wait.
   ASSERT_TRUE(StartDaemon(1)) << daemons_[1]->error;
   for (size_t n = 0; n < 30; ++n) {
-    ids.push_back(Submit(static_cast<int>(n % kDaemons),
-                         {{"character", character},
-                          {"motion", kAnimations[n % kAnimations.size()]},
-                          {"levels", kLadders[n / kAnimations.size()]},
-                          {"fps", 30}}));
+    ids.push_back(
+        Submit(static_cast<int>(n % kDaemons), {{"character", character},
+                                                {"motion", kAnimations[n % kAnimations.size()]},
+                                                {"levels", kLadders[n / kAnimations.size()]},
+                                                {"fps", 30}}));
   }
   for (auto& daemon : daemons_) EXPECT_EQ(daemon->Stop(SIGKILL), 128 + SIGKILL);
   for (int d = 0; d < kDaemons; ++d) ASSERT_TRUE(StartDaemon(d)) << daemons_[d]->error;
