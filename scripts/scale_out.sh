@@ -21,6 +21,8 @@ free_port() {
     (exec 3<>"/dev/tcp/127.0.0.1/$port") 2>/dev/null || { echo "$port"; return; }
   done
 }
+# Whether the process runs (a zombie whose parent, the shell of "up", is gone does not).
+alive() { [ -e "/proc/$1" ] && ! grep -qE '^[0-9]+ \(.*\) Z' "/proc/$1/stat" 2>/dev/null; }
 wait_for() {  # URL: until it answers 200 (20 s)
   for _ in $(seq 200); do curl -sf -o /dev/null "$1" && return 0; sleep 0.1; done
   echo "scale_out: $1 did not answer" >&2
@@ -102,7 +104,7 @@ down)
     [ ${#pids[@]} -gt 0 ] || continue
     kill "${pids[@]}" 2>/dev/null || true
     for pid in "${pids[@]}"; do
-      for _ in $(seq 300); do kill -0 "$pid" 2>/dev/null || break; sleep 0.1; done
+      for _ in $(seq 300); do alive "$pid" || break; sleep 0.1; done
     done
   done
   ;;
