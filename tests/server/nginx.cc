@@ -13,7 +13,7 @@
 namespace motionlod::server::testing {
 namespace {
 
-constexpr const char* kBinary = "/usr/sbin/nginx";
+constexpr const char* kNginxBinary = "/usr/sbin/nginx";
 
 void Replace(std::string& text, const std::string& from, const std::string& to) {
   const size_t at = text.find(from);
@@ -22,7 +22,7 @@ void Replace(std::string& text, const std::string& from, const std::string& to) 
 
 }  // namespace
 
-bool Nginx::Installed() { return ::access(kBinary, X_OK) == 0; }
+bool Nginx::Installed() { return ::access(kNginxBinary, X_OK) == 0; }
 
 Nginx::~Nginx() {
   if (pid_ <= 0) return;
@@ -63,8 +63,8 @@ bool Nginx::Start(const std::vector<int>& daemon_ports) {
   if (pid == 0) {
     const int log = ::open(stderr_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
     if (log >= 0) ::dup2(log, STDERR_FILENO);
-    ::execl(kBinary, kBinary, "-p", prefix.c_str(), "-c", config.c_str(), "-g", "daemon off;",
-            static_cast<char*>(nullptr));
+    ::execl(kNginxBinary, kNginxBinary, "-p", prefix.c_str(), "-c", config.c_str(), "-g",
+            "daemon off;", static_cast<char*>(nullptr));
     ::_exit(127);
   }
   if (pid < 0) return false;

@@ -4,18 +4,21 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <chrono>
+#include <thread>
 
+#include "server/redis_client.h"
 #include "tests/server/daemon.h"
 #include "tests/server/loopback.h"
 
 namespace motionlod::server::testing {
 namespace {
 
-constexpr const char* kBinary = "/usr/bin/redis-server";
+constexpr const char* kRedisBinary = "/usr/bin/redis-server";
 
 }  // namespace
 
-bool Redis::Installed() { return ::access(kBinary, X_OK) == 0; }
+bool Redis::Installed() { return ::access(kRedisBinary, X_OK) == 0; }
 
 Redis::~Redis() { Kill(); }
 
@@ -35,14 +38,21 @@ bool Redis::Start() {
   const std::string log = (dir_ / "redis.log").string();
   const pid_t pid = ::fork();
   if (pid == 0) {
-    ::execl(kBinary, kBinary, "--port", port.c_str(), "--bind", "127.0.0.1", "--dir", dir.c_str(),
-            "--appendonly", "yes", "--appendfsync", "always", "--save", "", "--logfile",
-            log.c_str(), "--daemonize", "no", static_cast<char*>(nullptr));
+    ::execl(kRedisBinary, kRedisBinary, "--port", port.c_str(), "--bind", "127.0.0.1", "--dir",
+            dir.c_str(), "--appendonly", "yes", "--appendfsync", "always", "--save", "",
+            "--logfile", log.c_str(), "--daemonize", "no", static_cast<char*>(nullptr));
     ::_exit(127);
   }
   if (pid < 0) return false;
   pid_ = pid;
-  if (WaitUntilAccepting(pid_, port_)) return true;
+  if (WaitUntilAccepting(pid_, port_)) {
+    // Accepting is not answering: a restart loads the append-only file first (LOADING).
+    RedisConnection connection(*ParseRedisUrl(url()), 1.0);
+    for (int attempt = 0; attempt < 500; ++attempt) {
+      if (connection.Command({"PING"}).ok()) return true;
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+  }
   error = "redis-server did not start: " + ReadFile(log);
   return false;
 }

@@ -11,6 +11,7 @@
 #include <thread>
 
 #include "io/sha256.h"
+#include "server/redis_client.h"
 #include "tests/server/nginx.h"
 #include "tests/server/redis.h"
 #include "tests/server/test_util.h"
@@ -160,7 +161,7 @@ TEST_F(ScaleOut, SixtyBakesRoundRobinCompleteOnceEachAndEveryDaemonServesEveryLe
     EXPECT_EQ(Gauge(*client, "motionlodd_queue_depth"), 0);
   }
   EXPECT_EQ(baked, 60);
-  for (size_t r = 0; r < ids.size(); r += 7) ExpectEveryDaemonServesTheLevels(ids[r]);
+  for (const std::string& id : ids) ExpectEveryDaemonServesTheLevels(id);
   // The same bake submitted again anywhere is the finished one, not a new run.
   auto again = Client(2);
   auto resubmitted = SubmitBake(*again, requests[0]);
@@ -226,6 +227,22 @@ TEST_F(ScaleOut, AKilledDaemonsJobIsTakenOverAndKillingAllThreeLosesNothing) {
   }
   ExpectEveryDaemonServesTheLevels(ids[0]);
   ExpectEveryDaemonServesTheLevels(ids.back());
+
+  // A job stored but never queued (its daemon died between the two, here made by hand
+  // while every daemon is down) is queued again when the same bake is submitted again.
+  const int runs_before = WaitForJob(*Client(0), ids[6], 5).value("attempts", 0);
+  for (auto& daemon : daemons_) EXPECT_EQ(daemon->Stop(SIGKILL), 128 + SIGKILL);
+  RedisPool redis(*ParseRedisUrl(redis_->url()), 2.0);
+  ASSERT_TRUE(redis.Command({"HSET", "motionlod:job:" + ids[6], "state", "queued"}).ok());
+  for (int d = 0; d < kDaemons; ++d) ASSERT_TRUE(StartDaemon(d)) << daemons_[d]->error;
+  EXPECT_EQ(Submit(1, {{"character", character},
+                       {"motion", kAnimations[0]},
+                       {"levels", kLadders[0]},
+                       {"fps", 30}}),
+            ids[6]);
+  const json rerun = WaitForJob(*Client(2), ids[6], 60);
+  EXPECT_EQ(rerun.value("state", ""), "succeeded") << rerun.dump();
+  EXPECT_EQ(rerun.value("attempts", 0), runs_before + 1) << rerun.dump();
 }
 
 // The poison-job cap holds across daemons: a bake whose daemon died max_job_crashes times
