@@ -122,9 +122,12 @@ Status RedisConnection::Connect() {
   }
   redisSetTimeout(context_, timeout);
   redisEnableKeepAlive(context_);
+  // A connection that failed its AUTH or SELECT is not kept (the next command tries again).
   const auto setup = [&](const std::vector<std::string_view>& args) -> Status {
     auto reply = Command(args);
-    return reply.ok() ? Status::Ok() : reply.status();
+    if (reply.ok()) return Status::Ok();
+    Drop();
+    return reply.status();
   };
   if (!endpoint_.password.empty()) {
     if (Status status = setup({"AUTH", endpoint_.password}); !status.ok()) return status;
