@@ -218,9 +218,11 @@ void RedisJobQueue::Take(RedisConnection& connection, const std::string& entry,
                entry, id);
 }
 
+// Every fifth of the visibility timeout: a daemon starved of CPU for most of it (a loaded
+// machine) still keeps its bakes.
 void RedisJobQueue::Heartbeat() {
   const auto period = std::chrono::milliseconds(
-      std::max<int64_t>(100, static_cast<int64_t>(visibility_seconds_ * 1000 / 3)));
+      std::max<int64_t>(100, static_cast<int64_t>(visibility_seconds_ * 1000 / 5)));
   while (!stopping_.load() || running_.load() > 0) {
     std::vector<std::string> entries;
     {
