@@ -6,6 +6,7 @@
 
 #include <chrono>
 #include <thread>
+#include <vector>
 
 #include "server/redis_client.h"
 #include "tests/server/daemon.h"
@@ -36,11 +37,16 @@ bool Redis::Start() {
   const std::string port = std::to_string(port_);
   const std::string dir = dir_.string();
   const std::string log = (dir_ / "redis.log").string();
+  // Built before the fork: the child of a threaded process must not allocate.
+  std::vector<const char*> argv = {
+      kRedisBinary, "--port",       port.c_str(), "--bind",        "127.0.0.1", "--dir",
+      dir.c_str(),  "--appendonly", "yes",        "--appendfsync", "always",    "--save",
+      "",           "--logfile",    log.c_str(),  "--daemonize",   "no"};
+  if (!password_.empty()) argv.insert(argv.end(), {"--requirepass", password_.c_str()});
+  argv.push_back(nullptr);
   const pid_t pid = ::fork();
   if (pid == 0) {
-    ::execl(kRedisBinary, kRedisBinary, "--port", port.c_str(), "--bind", "127.0.0.1", "--dir",
-            dir.c_str(), "--appendonly", "yes", "--appendfsync", "always", "--save", "",
-            "--logfile", log.c_str(), "--daemonize", "no", static_cast<char*>(nullptr));
+    ::execv(kRedisBinary, const_cast<char* const*>(argv.data()));
     ::_exit(127);
   }
   if (pid < 0) return false;

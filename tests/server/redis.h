@@ -13,7 +13,9 @@ namespace motionlod::server::testing {
 
 class Redis {
  public:
-  explicit Redis(std::filesystem::path dir) : dir_(std::move(dir)) {}
+  // With a `password`, Redis requires it (requirepass) and url() carries it.
+  explicit Redis(std::filesystem::path dir, std::string password = "")
+      : dir_(std::move(dir)), password_(std::move(password)) {}
   ~Redis();
   Redis(const Redis&) = delete;
   Redis& operator=(const Redis&) = delete;
@@ -25,11 +27,15 @@ class Redis {
   // SIGKILL, and waits for the exit.
   void Kill();
   int port() const { return port_; }
-  std::string url() const { return "redis://127.0.0.1:" + std::to_string(port_); }
+  std::string url() const {
+    return "redis://" + (password_.empty() ? "" : ":" + password_ + "@") +
+           "127.0.0.1:" + std::to_string(port_);
+  }
   std::string error;
 
  private:
   std::filesystem::path dir_;
+  std::string password_;
   pid_t pid_ = -1;
   int port_ = 0;
 };

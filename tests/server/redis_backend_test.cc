@@ -220,6 +220,27 @@ TEST(RedisUrl, ParsesHostsPortsDatabasesSocketsAndRefusesTheRest) {
     EXPECT_EQ(ParseRedisUrl(bad).status().code(), StatusCode::kInvalidArgument) << bad;
 }
 
+// A password and a database from the URL are sent when connecting; a wrong or missing
+// password is refused with Redis's words.
+TEST(RedisUrl, PasswordsAndDatabasesFromTheUrlAreUsed) {
+  if (!Redis::Installed()) GTEST_SKIP() << "redis-server is not installed";
+  Redis redis(TestDirectory(), "s3cret-pass");
+  ASSERT_TRUE(redis.Start()) << redis.error;
+  const std::string address = "127.0.0.1:" + std::to_string(redis.port());
+  RedisPool db3(*ParseRedisUrl("redis://:s3cret-pass@" + address + "/3"), 2.0);
+  ASSERT_TRUE(db3.Command({"SET", "where", "db3"}).ok());
+  RedisPool db0(*ParseRedisUrl(redis.url()), 2.0);
+  EXPECT_TRUE(db0.Command({"GET", "where"})->nil());
+  EXPECT_EQ(db3.Command({"GET", "where"})->text, "db3");
+  RedisPool wrong(*ParseRedisUrl("redis://:wrong@" + address), 2.0);
+  const Status refused = wrong.Command({"PING"}).status();
+  EXPECT_EQ(refused.code(), StatusCode::kInternal);
+  EXPECT_NE(refused.message().find("WRONGPASS"), std::string::npos) << refused.message();
+  EXPECT_FALSE(wrong.Command({"PING"}).ok());  // the connection was not kept
+  RedisPool none(*ParseRedisUrl("redis://" + address), 2.0);
+  EXPECT_NE(none.Command({"PING"}).status().message().find("NOAUTH"), std::string::npos);
+}
+
 // The queue on a stream where a consumer died holding a job: that job is taken over after
 // the visibility timeout; ids are queued once and up to the capacity; an interrupted job
 // is queued again at the end; nothing is left pending.
