@@ -7,7 +7,8 @@
 #   scripts/scale_out.sh check DIR    upload, bake and fetch through the proxy, bytes checked
 #   scripts/scale_out.sh down DIR     stop them (SIGTERM: the daemons drain)
 #   scripts/scale_out.sh test DIR     up with 3 daemons, check, down (CI: ctest scale_out_script)
-# Needs a build (build/) with the daemon and the client, redis-server and nginx.
+# Needs a build (BUILD, default build/) with the daemon and the client, redis-server and
+# nginx. MOTIONLODD_ARGS: more flags for every daemon (e.g. "--threads 1").
 set -euo pipefail
 cd "$(dirname "$0")/.."
 command=${1:?usage: $0 up|check|down DIR [N]}

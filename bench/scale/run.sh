@@ -4,7 +4,9 @@
 # hardware thread). Each measurement starts a fresh Redis, uploads the sample character
 # through the proxy, submits every bake at once (its 11 animations at 30 and 24 fps, the
 # default ladder: 22 bakes) and times until the last has succeeded. The orders alternate
-# across ROUNDS (default 3); the medians are printed. Needs a build (build/).
+# across ROUNDS (default 3); the medians are printed. WORKERS=N gives each daemon N bake
+# workers instead (WORKERS=1: one core per daemon, as on machines of their own). Needs a
+# build (build/).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 rounds=${ROUNDS:-3}
@@ -15,7 +17,7 @@ animations=(Jump_Full_Long Jump_Full_Short Jump_Idle Jump_Land Jump_Start Runnin
 
 measure() {  # DAEMONS -> bakes per minute
   local dir="$work/run$RANDOM" url character ids=() start end
-  bash scripts/scale_out.sh up "$dir" "$1" >/dev/null
+  MOTIONLODD_ARGS=${WORKERS:+--threads $WORKERS} bash scripts/scale_out.sh up "$dir" "$1" >/dev/null
   url=$(cat "$dir/url")
   character=$(curl -sf -H 'Content-Type: application/octet-stream' \
     --data-binary @samples/Rig_Medium_MovementBasic.glb \
@@ -55,4 +57,4 @@ echo "|---|---|---|"
 for daemons in 1 2 3; do
   echo "| $daemons | $(median <<<"${results[$daemons]}") | ${results[$daemons]}|"
 done
-echo "machine: $(nproc) cores, load $(cut -d' ' -f1-3 /proc/loadavg)"
+echo "machine: $(nproc) cores, load $(cut -d' ' -f1-3 /proc/loadavg); workers per daemon: ${WORKERS:-one per hardware thread}"
