@@ -36,11 +36,7 @@ Status Jobs::Start() {
     for (const std::string& id : unfinished) {
       auto job = context_.store->GetJob(id);
       if (!job.ok()) return job.status();
-      if (!job->has_value()) continue;
-      LiveJob live;
-      live.record = **job;
-      live.version = next_version_++;
-      board_[id] = std::move(live);
+      if (job->has_value()) PutOnBoard(**job);
     }
   }
   const Config& config = context_.config;
@@ -110,10 +106,7 @@ Result<Done> Jobs::Enqueue(const JobRecord& job) {
   const bool shared = context_.store->shared();
   if (!shared) {
     std::lock_guard lock(board_mutex_);
-    LiveJob live;
-    live.record = job;
-    live.version = next_version_++;
-    board_[job.id] = std::move(live);
+    PutOnBoard(job);
   }
   const JobQueue::PushResult pushed =
       queue_ ? queue_->Push(job.id) : JobQueue::PushResult::kStopped;
@@ -148,6 +141,18 @@ void Jobs::Cancel(const std::string& id) {
   board_changed_.notify_all();
 }
 
+uint64_t Jobs::NextVersion(const JobRecord& record) {
+  return context_.store->shared() ? record.version : next_version_++;
+}
+
+Jobs::LiveJob& Jobs::PutOnBoard(const JobRecord& record) {
+  LiveJob& live = board_[record.id];
+  live = LiveJob{};
+  live.record = record;
+  live.version = NextVersion(record);
+  return live;
+}
+
 void Jobs::Publish(const JobRecord& record, bool erase) {
   {
     std::lock_guard lock(board_mutex_);
@@ -157,7 +162,7 @@ void Jobs::Publish(const JobRecord& record, bool erase) {
       auto found = board_.find(record.id);
       if (found == board_.end()) return;  // deleted meanwhile
       found->second.record = record;
-      found->second.version = context_.store->shared() ? record.version : next_version_++;
+      found->second.version = NextVersion(record);
     }
   }
   board_changed_.notify_all();
@@ -258,12 +263,8 @@ void Jobs::Run(const std::string& id, bool& interrupted) {
     if (!stored->has_value()) return;
     job = **stored;
     if (job.state == "succeeded" || job.state == "failed") return;  // delivered again
-    LiveJob live;
-    live.record = job;
-    cancel = live.cancel;
     std::lock_guard lock(board_mutex_);
-    live.version = store.shared() ? job.version : next_version_++;
-    board_[id] = std::move(live);
+    cancel = PutOnBoard(job).cancel;
   }
   if (cancel->load()) return;
   const auto fail = [&](const std::string& code, const std::string& detail) {

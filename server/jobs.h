@@ -62,6 +62,11 @@ class Jobs {
   Status FinishBake(const BakeRecord& bake, pipeline::BakeOutput output, JobRecord& job,
                     std::vector<std::string>& written);
   void Publish(const JobRecord& record, bool erase = false);  // board update + notify
+  // A record's version on the board: the store's when shared (every daemon answers the
+  // same), else this process's next. Under board_mutex_.
+  uint64_t NextVersion(const JobRecord& record);
+  // Puts the record on the board as a new live job (a fresh cancel flag). Under board_mutex_.
+  LiveJob& PutOnBoard(const JobRecord& record);
   Result<proto::api::JobStatus> FromStore(const std::string& id);
   // Wait for a job not on the board: reads the store every kStorePollInterval.
   Result<proto::api::JobStatus> WaitInStore(const std::string& id, uint64_t after_version,
