@@ -309,8 +309,9 @@ void Jobs::Run(const std::string& id, bool& interrupted) {
   job.stage = "import";
   job.error_code.clear();
   job.error_detail.clear();
-  if (auto updated = store.UpdateJob(job); !updated.ok()) return fail_with(updated.status());
-  else if (!*updated) return Publish(job, true);
+  auto updated = store.UpdateJob(job);
+  if (!updated.ok()) return fail_with(updated.status());
+  if (!*updated) return Publish(job, true);
   Publish(job);
   spdlog::info("bake {} running (attempt {})", id, job.attempts);
 
