@@ -377,7 +377,9 @@ void Jobs::Run(const std::string& id, bool& interrupted) {
       (void)store.UpdateJob(job);
       interrupted = true;
       ++context_.bake_metrics.interrupted;
-      spdlog::info("bake {} interrupted by shutdown; it runs again (at the next start, or now on another daemon of a shared store)", id);
+      spdlog::info("bake {} interrupted by shutdown; it runs again (at the next start, or now "
+                   "on another daemon of a shared store)",
+                   id);
     }
     return Publish(job, true);
   }
